@@ -1,0 +1,70 @@
+"""What every benchmark shares: the thesis scene, argument parsing, and writing the table, JSON and plot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+MODELS = REPO.parent / "shared" / "models"
+RESULTS = REPO / "benchmarks" / "results"
+
+
+def parser(description: str) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--quick", action="store_true", help="a small version that runs in seconds (CI smoke test)")
+    p.add_argument("--json", metavar="PATH", default=None, help="write machine-readable results here "
+                   "(default: benchmarks/results/<name>.json)")
+    p.add_argument("--device", default=None, help="Warp device (default: cuda if present, else cpu)")
+    return p
+
+
+def thesis_scene(*, quick: bool, sh_order: int | None = None):
+    """The shared Stanford bunny on a 380 x 380 floor with 3 x 1 x 3 light samples (quick: 100 x 100, 2 x 1 x 1)."""
+    from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+
+    path = MODELS / "stanford-bunny.obj"
+    if not path.is_file():
+        sys.exit(f"benchmark needs {path} (the shared test meshes)")
+    pos, faces = load_mesh(path)
+    res = 100 if quick else 380
+    grid = [2, 1, 1] if quick else [3, 1, 3]
+    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (res, 1.0, THESIS_MATERIAL), {"grid": grid}, "lights",
+                     f"stanford-bunny + {res}x{res} floor")
+
+
+def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
+    """Rows as a fixed-width text table; columns are (key, header, format)."""
+    head = "  ".join(f"{h:>{max(len(h), 12)}}" for _, h, _ in columns)
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        cells = []
+        for key, h, fmt in columns:
+            v = r.get(key, "")
+            cells.append(f"{(format(v, fmt) if v != '' else ''):>{max(len(h), 12)}}")
+        lines.append("  ".join(cells))
+    return "\n".join(lines)
+
+
+def environment(device: str) -> dict:
+    import warp
+
+    return {"python": platform.python_version(), "machine": platform.machine(), "warp": warp.config.version,
+            "device": device, "numpy": np.__version__}
+
+
+def write(name: str, results: dict, json_path: str | None) -> Path:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path = Path(json_path) if json_path else RESULTS / f"{name}.json"
+    path.write_text(json.dumps(results, indent=2))
+    return path
+
+
+def plot_path(name: str) -> Path:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    return RESULTS / f"{name}.png"

@@ -1,0 +1,57 @@
+"""Shadow-ray visibility from vertices to a point light through Warp's BVH (SPEC 4, "in shadow" of qreduce).
+
+A ray leaves each vertex from ``p + offset * n`` (``offset`` scales with the scene, so 1e-4 and 1e4 unit scenes
+behave alike) toward the light and stops ``offset`` short of it; any hit means shadow. Vertices facing away from the
+light cast no ray at all: their state is decided by the normal alone.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+#: visibility states written by :func:`shadow_rays`
+SHADOWED = 0
+LIT = 1
+BACK_FACING = 2
+SKIPPED = 3
+
+
+@wp.func
+def ray_origin(p: wp.vec3, n: wp.vec3, offset: float):
+    # lift the origin off the surface along the normal so the ray does not hit the triangles around the vertex
+    return p + offset * n
+
+
+@wp.kernel
+def shadow_rays(
+    mesh: wp.uint64,  # In: BVH of the whole scene
+    points: wp.array(dtype=wp.vec3),  # In: (V,) vertex positions
+    normals: wp.array(dtype=wp.vec3),  # In: (V,) unit vertex normals
+    ids: wp.array(dtype=wp.int32),  # In: (K,) vertices to test
+    light: wp.vec3,  # In: light position
+    offset: float,  # In: ray offset in scene units
+    visible: wp.array(dtype=wp.uint8),  # Out: (K,) SHADOWED, LIT or BACK_FACING
+):
+    k = wp.tid()
+    v = ids[k]
+    p = points[v]
+    n = normals[v]
+    to_light = light - p
+    if wp.length(to_light) <= offset:
+        # the light sits on the vertex: nothing can lie between them
+        visible[k] = wp.uint8(LIT)
+        return
+    if wp.dot(n, to_light) <= 0.0:
+        visible[k] = wp.uint8(BACK_FACING)  # no ray: the surface itself hides the light
+        return
+    o = ray_origin(p, n, offset)
+    d = light - o
+    dist = wp.length(d)
+    if dist <= 2.0 * offset:
+        visible[k] = wp.uint8(LIT)
+        return
+    hit = wp.mesh_query_ray_anyhit(mesh, o, d / dist, dist - offset)
+    if hit:
+        visible[k] = wp.uint8(SHADOWED)
+    else:
+        visible[k] = wp.uint8(LIT)

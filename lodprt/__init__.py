@@ -1,0 +1,38 @@
+"""lodprt: level-of-detail based precomputed local radiance transfer.
+
+Public API (everything else may change)::
+
+    scene = lodprt.load_scene("demo")                 # or a TOML scene file or a mesh path
+    result = lodprt.bake(scene, "out.zarr", sh_order=4, device="cpu")
+    store = lodprt.open_store("out.zarr")
+    rgb = store.radiance(sample=0, eye=(0.0, 0.5, 1.0))   # (V, 3) float32
+
+Names are imported on first use, so ``import lodprt`` stays cheap (Warp loads only when a kernel is needed).
+"""
+
+import importlib
+
+from lodprt.errors import LodprtError, SceneError, StoreError
+
+_LAZY = {
+    "Scene": "lodprt.scene",
+    "load_scene": "lodprt.scene",
+    "bake": "lodprt.bake",
+    "BakeResult": "lodprt.bake",
+    "Store": "lodprt.store",
+    "open_store": "lodprt.store",
+}
+
+__all__ = ["LodprtError", "SceneError", "StoreError", *_LAZY]
+
+__version__ = "0.1.0"
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'lodprt' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(__all__)

@@ -1,0 +1,296 @@
+"""Full-resolution local PRT bake (SPEC 4 without the cut): per light sample, visibility -> Phong -> SH -> store.
+
+Light samples are independent tasks: each one gets its own device arrays and touches no other sample's state.
+On the CPU, Warp runs a launch on one thread but releases the GIL, so samples run on ``jobs`` Python threads
+(default: every core, at most the number of samples); on CUDA they run one after another on the device.
+
+What the scene does not need is left out:
+  * no shadow ray for a vertex facing away from the light (visibility state BACK_FACING);
+  * one coefficient per vertex (y_0 only) when no material has a specular term;
+  * one channel when every material is grey; the light's RGB intensity is applied when reading;
+  * vertices that no face references are never baked.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import logging
+import os
+import threading
+import time
+from typing import Callable
+
+import numpy as np
+
+from lodprt import sh
+from lodprt.devices import resolve_device, warp
+from lodprt.errors import LodprtError
+from lodprt.scene import Scene
+from lodprt.store import FORMAT_NAME, FORMAT_VERSION, StoreWriter, sample_group
+
+log = logging.getLogger(__name__)
+
+#: shadow-ray offset as a fraction of the scene's bounding diagonal
+RAY_OFFSET_FRACTION = 1e-4
+
+
+@dataclasses.dataclass
+class BakeResult:
+    """What a bake wrote and how long it took (``bake_seconds`` excludes kernel loading, ``load_seconds``)."""
+
+    path: str | None
+    sh_order: int
+    coefficients_per_vertex: int
+    channels: int
+    bake_seconds: float
+    load_seconds: float
+    device: str
+    samples: list[dict]
+
+
+def ray_offset(scene: Scene) -> float:
+    """Shadow-ray offset in scene units: scales with the scene's size and with float32 resolution of its coordinates."""
+    coord = float(np.abs(scene.bounds).max())
+    return max(RAY_OFFSET_FRACTION * scene.diagonal, 64.0 * np.finfo(np.float32).eps * coord)
+
+
+def layout(scene: Scene, sh_order: int) -> tuple[int, int]:
+    """(coefficients per vertex, channels) the scene needs: 1 coefficient without specular, 1 channel when grey."""
+    specular = any(m.ks > 0 for m in scene.materials)
+    grey = all(m.grey for m in scene.materials)
+    return (sh_order * sh_order if specular else 1), (1 if grey else 3)
+
+
+def material_tables(scene: Scene, sh_order: int, channels: int) -> dict[str, np.ndarray]:
+    """Per-material kd (M, C), ks (M,), shininess (M,) and the scaled zonal table (M, order) of the Phong lobe."""
+    kd = np.array([m.kd[:channels] for m in scene.materials], np.float32)
+    ks = np.array([m.ks for m in scene.materials], np.float32)
+    n = np.array([m.shininess for m in scene.materials], np.float32)
+    bands = np.arange(sh_order)
+    # P-6 factor sqrt(4 pi/(2l+1)) folded in: lobe_lm = sqrt(4 pi/(2l+1)) z_l y_lm(R)
+    zonal = np.array(
+        [np.sqrt(4 * np.pi / (2 * bands + 1)) * sh.cosine_power_zonal(m.shininess, sh_order) for m in scene.materials],
+        np.float32,
+    )
+    return {"kd": kd, "ks": ks, "shininess": n, "zonal": zonal}
+
+
+class _Baker:
+    """Device-side state of one bake: the BVH and the per-sample work, shared read-only between threads."""
+
+    def __init__(self, scene: Scene, sh_order: int, device: str, ids: np.ndarray):
+        from lodprt.kernels import sh as ksh
+
+        wp = warp()
+        if sh_order > ksh.MAX_KERNEL_ORDER:
+            raise LodprtError(f"sh_order {sh_order}: the float32 kernels go up to order {ksh.MAX_KERNEL_ORDER}")
+        if sh_order < 1:
+            raise LodprtError(f"sh_order {sh_order}: must be >= 1")
+        self.wp = wp
+        self.device = device
+        self.sh_order = sh_order
+        self.ncoef, self.channels = layout(scene, sh_order)
+        self.points = wp.array(scene.positions.astype(np.float32), dtype=wp.vec3, device=device)
+        self.normals = wp.array(scene.normals.astype(np.float32), dtype=wp.vec3, device=device)
+        self.indices = wp.array(scene.faces.astype(np.int32).ravel(), dtype=wp.int32, device=device)
+        self.mesh = wp.Mesh(points=self.points, indices=self.indices)
+        self.material_id = wp.array(scene.material_id.astype(np.int32), dtype=wp.int32, device=device)
+        tables = material_tables(scene, sh_order, self.channels)
+        self.kd = wp.array(tables["kd"], dtype=wp.float32, device=device)
+        self.ks = wp.array(tables["ks"], dtype=wp.float32, device=device)
+        self.zonal = wp.array(tables["zonal"], dtype=wp.float32, device=device)
+        self.ids_host = ids.astype(np.int32)
+        self.ids = wp.array(self.ids_host, dtype=wp.int32, device=device)
+        self.offset = ray_offset(scene)
+        self.falloff = 1 if scene.lights.falloff == "inverse-square" else 0
+        self.radius = float(scene.lights.radius)
+        self._local = threading.local()
+
+    def _scratch(self):
+        # one set of work arrays per thread: samples never share mutable state
+        s = getattr(self._local, "arrays", None)
+        if s is None:
+            wp, k = self.wp, len(self.ids_host)
+            s = {
+                "visible": wp.zeros(k, dtype=wp.uint8, device=self.device),
+                "basis": wp.zeros((k, self.sh_order * self.sh_order), dtype=wp.float32, device=self.device),
+                "coeffs": wp.zeros((k, self.channels, self.ncoef), dtype=wp.float32, device=self.device),
+            }
+            self._local.arrays = s
+        return s
+
+    def visibility(self, light: np.ndarray) -> np.ndarray:
+        """Visibility state per baked vertex, (K,) uint8 (kernels.visibility states)."""
+        from lodprt.kernels import visibility as kvis
+
+        wp, s = self.wp, self._scratch()
+        wp.launch(
+            kvis.shadow_rays,
+            dim=len(self.ids_host),
+            inputs=[self.mesh.id, self.points, self.normals, self.ids, wp.vec3(*map(float, light)), float(self.offset)],
+            outputs=[s["visible"]],
+            device=self.device,
+        )
+        return s["visible"]
+
+    def sample(self, light: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bake one light sample: (coefficients (K, C, ncoef) float32, visibility (K,) uint8)."""
+        from lodprt.kernels import shading as kshade
+
+        wp, s = self.wp, self._scratch()
+        visible = self.visibility(light)
+        wp.launch(
+            kshade.phong_sh,
+            dim=len(self.ids_host),
+            inputs=[
+                self.points,
+                self.normals,
+                self.material_id,
+                self.ids,
+                visible,
+                self.kd,
+                self.ks,
+                self.zonal,
+                wp.vec3(*map(float, light)),
+                self.falloff,
+                self.radius,
+                self.sh_order,
+                s["basis"],
+            ],
+            outputs=[s["coeffs"]],
+            device=self.device,
+        )
+        # .numpy() is a view of device memory on the CPU: copy, the next sample on this thread reuses it
+        return s["coeffs"].numpy().copy(), visible.numpy().copy()
+
+
+def load_kernels(device: str) -> float:
+    """Compile or load the bake's Warp modules on ``device`` before any thread launches them; returns seconds."""
+    from lodprt.kernels import shading as kshade
+    from lodprt.kernels import visibility as kvis
+
+    wp = warp()
+    t0 = time.perf_counter()
+    for module in (kvis, kshade):
+        wp.load_module(module, device=device)
+    return time.perf_counter() - t0
+
+
+def bake(
+    scene: Scene,
+    out: str | os.PathLike | None,
+    *,
+    sh_order: int = 4,
+    device: str | None = None,
+    overwrite: bool = False,
+    jobs: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> BakeResult:
+    """Bake every referenced vertex of ``scene`` for every light sample and write the store at ``out``.
+
+    ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample.
+    Raises StoreError before any work when ``out`` exists and ``overwrite`` is false.
+    """
+    device = resolve_device(device)
+    writer = StoreWriter(out, overwrite=overwrite) if out is not None else None
+    try:
+        load_seconds = load_kernels(device)
+        t0 = time.perf_counter()
+        ids = np.flatnonzero(scene.referenced).astype(np.int32)
+        baker = _Baker(scene, sh_order, device, ids)
+        lights = scene.lights.positions
+        if jobs is None:
+            jobs = (os.cpu_count() or 1) if device == "cpu" else 1
+        jobs = max(1, min(jobs, len(lights)))
+        if writer is not None:
+            _write_scene(writer, scene, baker)
+        samples: list[dict] = [{} for _ in lights]
+
+        def run(k: int):
+            t = time.perf_counter()
+            coeffs, visible = baker.sample(lights[k])
+            return k, coeffs, visible, time.perf_counter() - t
+
+        with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(run, k) for k in range(len(lights))]
+            for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
+                k, coeffs, visible, seconds = fut.result()
+                counts = np.bincount(visible, minlength=4)
+                info = {
+                    "vertices_kept": int(len(ids)),
+                    "bytes": int(ids.nbytes + coeffs.nbytes),
+                    "seconds": float(seconds),
+                    "shadowed": int(counts[0]),
+                    "lit": int(counts[1]),
+                    "back_facing": int(counts[2]),
+                }
+                samples[k] = info
+                if writer is not None:
+                    g = sample_group(k)
+                    writer.array(f"{g}/vertex_ids", ids, chunk_rows=1 << 18)
+                    writer.array(f"{g}/coefficients", coeffs, chunk_rows=1 << 16)
+                    writer.attrs(g, **info)
+                if progress is not None:
+                    progress(done, len(lights))
+        bake_seconds = time.perf_counter() - t0
+        result = BakeResult(
+            path=None if out is None else str(out),
+            sh_order=sh_order,
+            coefficients_per_vertex=baker.ncoef,
+            channels=baker.channels,
+            bake_seconds=bake_seconds,
+            load_seconds=load_seconds,
+            device=device,
+            samples=samples,
+        )
+        if writer is not None:
+            writer.attrs(
+                format=FORMAT_NAME,
+                format_version=FORMAT_VERSION,
+                lodprt_version=_version(),
+                mode="full",
+                sh_order=sh_order,
+                coefficients_per_vertex=baker.ncoef,
+                channels=baker.channels,
+                bake_seconds=bake_seconds,
+                load_seconds=load_seconds,
+                device=device,
+                source=scene.source,
+                ray_offset=baker.offset,
+            )
+            writer.commit()
+        return result
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+
+
+def _version() -> str:
+    from lodprt import __version__
+
+    return __version__
+
+
+def _write_scene(writer: StoreWriter, scene: Scene, baker: _Baker) -> None:
+    writer.array("scene/positions", scene.positions.astype(np.float32), chunk_rows=1 << 18)
+    writer.array("scene/normals", scene.normals.astype(np.float32), chunk_rows=1 << 18)
+    writer.array("scene/faces", scene.faces.astype(np.int32), chunk_rows=1 << 18)
+    writer.array("scene/material_id", scene.material_id.astype(np.int32), chunk_rows=1 << 18)
+    writer.array("scene/object_id", scene.object_id.astype(np.int32), chunk_rows=1 << 18)
+    writer.attrs("scene", object_names=list(scene.object_names))
+    tables = material_tables(scene, baker.sh_order, 3)
+    writer.array("materials/kd", tables["kd"])
+    writer.array("materials/ks", tables["ks"])
+    writer.array("materials/shininess", tables["shininess"])
+    lights = scene.lights
+    writer.array("lights/positions", lights.positions.astype(np.float32))
+    writer.attrs(
+        "lights",
+        grid=list(lights.grid),
+        box=list(lights.box),
+        intensity=list(lights.intensity),
+        falloff=lights.falloff,
+        radius=lights.radius,
+    )

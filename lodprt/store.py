@@ -1,0 +1,230 @@
+"""Bake store: one zarr v3 group per bake, readable with zarr and numpy alone (layout in docs/FORMAT.md).
+
+Writing goes to a sibling ``<name>.partial-<pid>`` folder that is renamed into place only when the bake finished,
+so an interrupted bake never leaves a half store and never destroys the previous one. An existing path is replaced
+only with ``overwrite=True`` and only when it is itself a lodprt store.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from lodprt.errors import StoreError
+
+FORMAT_NAME = "lodprt"
+FORMAT_VERSION = 1
+
+
+def sample_group(k: int) -> str:
+    return f"samples/{k:05d}"
+
+
+def is_store(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a zarr v3 group written by lodprt (any version)."""
+    meta = Path(path) / "zarr.json"
+    try:
+        doc = json.loads(meta.read_text())
+    except (OSError, ValueError):
+        return False
+    return doc.get("attributes", {}).get("format") == FORMAT_NAME
+
+
+def check_destination(path: str | os.PathLike, *, overwrite: bool) -> None:
+    """Refuse to write over anything, unless ``overwrite`` and the thing there is a lodprt store."""
+    path = Path(path)
+    if not path.exists():
+        if not path.parent.exists():
+            raise StoreError(f"{path}: the folder {path.parent} does not exist")
+        return
+    if not overwrite:
+        raise StoreError(f"{path}: already exists; pass --overwrite (overwrite=True) to replace it")
+    if not is_store(path):
+        raise StoreError(f"{path}: exists and is not a lodprt store; refusing to replace it even with --overwrite")
+
+
+class StoreWriter:
+    """Creates the store in a partial folder; ``commit()`` moves it into place."""
+
+    def __init__(self, path: str | os.PathLike, *, overwrite: bool):
+        import zarr
+
+        self.path = Path(path)
+        check_destination(self.path, overwrite=overwrite)
+        self.overwrite = overwrite
+        self.partial = self.path.with_name(f"{self.path.name}.partial-{os.getpid()}")
+        if self.partial.exists():
+            shutil.rmtree(self.partial)
+        self.root = zarr.open_group(str(self.partial), mode="w-", zarr_format=3)
+
+    def array(self, name: str, data: np.ndarray, *, chunk_rows: int | None = None) -> None:
+        data = np.ascontiguousarray(data)
+        chunks = None
+        if chunk_rows and data.ndim and len(data) > chunk_rows:
+            chunks = (chunk_rows,) + data.shape[1:]
+        arr = self.root.create_array(name, shape=data.shape, dtype=data.dtype, chunks=chunks or "auto")
+        if data.size:
+            arr[...] = data
+
+    def attrs(self, name: str | None = None, **values) -> None:
+        target = self.root if name is None else self.root.require_group(name)
+        target.attrs.update(values)
+
+    def commit(self) -> Path:
+        if self.path.exists():
+            check_destination(self.path, overwrite=self.overwrite)  # still a store we may replace
+            backup = self.path.with_name(f"{self.path.name}.replaced-{os.getpid()}")
+            self.path.rename(backup)
+            self.partial.rename(self.path)
+            shutil.rmtree(backup)
+        else:
+            self.partial.rename(self.path)
+        return self.path
+
+    def abort(self) -> None:
+        shutil.rmtree(self.partial, ignore_errors=True)
+
+
+class Store:
+    """Read access to a bake store (arrays are loaded on demand and exactly as written)."""
+
+    def __init__(self, path: str | os.PathLike):
+        import zarr
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise StoreError(f"{self.path}: no such store")
+        if not is_store(self.path):
+            raise StoreError(f"{self.path}: not a lodprt store (zarr.json missing or without attribute format='lodprt')")
+        self.root = zarr.open_group(str(self.path), mode="r")
+        self.attrs = dict(self.root.attrs)
+        version = self.attrs.get("format_version")
+        if version != FORMAT_VERSION:
+            raise StoreError(f"{self.path}: format_version {version!r}; this lodprt reads version {FORMAT_VERSION}")
+        self._cache: dict[str, np.ndarray] = {}
+
+    def read(self, name: str) -> np.ndarray:
+        if name not in self._cache:
+            try:
+                self._cache[name] = self.root[name][...]
+            except KeyError as exc:
+                raise StoreError(f"{self.path}: field '{name}' is missing") from exc
+        return self._cache[name]
+
+    # -- scene -----------------------------------------------------------------------------------------------
+    @property
+    def positions(self) -> np.ndarray:
+        return self.read("scene/positions")
+
+    @property
+    def normals(self) -> np.ndarray:
+        return self.read("scene/normals")
+
+    @property
+    def faces(self) -> np.ndarray:
+        return self.read("scene/faces")
+
+    @property
+    def num_vertices(self) -> int:
+        return int(self.root["scene/positions"].shape[0])
+
+    @property
+    def sh_order(self) -> int:
+        return int(self.attrs["sh_order"])
+
+    @property
+    def light_positions(self) -> np.ndarray:
+        return self.read("lights/positions")
+
+    @property
+    def num_samples(self) -> int:
+        return int(self.root["lights/positions"].shape[0])
+
+    @property
+    def intensity(self) -> np.ndarray:
+        return np.asarray(self.root["lights"].attrs["intensity"], dtype=np.float64)
+
+    def _check_sample(self, k: int) -> int:
+        if not 0 <= k < self.num_samples:
+            raise StoreError(f"{self.path}: sample {k} out of range 0..{self.num_samples - 1}")
+        return k
+
+    def sample(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex ids (K,) int32 and coefficients (K, C, ncoef) float32 of light sample ``k``."""
+        g = sample_group(self._check_sample(k))
+        return self.read(f"{g}/vertex_ids"), self.read(f"{g}/coefficients")
+
+    def sample_info(self, k: int) -> dict:
+        g = self.root[sample_group(self._check_sample(k))]
+        return dict(g.attrs)
+
+    def radiance(self, sample: int, eye) -> np.ndarray:
+        """Radiance toward ``eye`` of every vertex, (V, 3) float32, from the SH coefficients of ``sample`` (T-7).
+
+        The light's RGB intensity scales the stored unit-intensity coefficients; vertices the sample does not hold
+        (never baked: unreferenced) read 0.
+        """
+        from lodprt import sh
+
+        eye = np.asarray(eye, dtype=np.float64)
+        if eye.shape != (3,) or not np.isfinite(eye).all():
+            raise StoreError(f"eye: expected 3 finite numbers, got {eye.tolist()}")
+        ids, coeffs = self.sample(sample)
+        out = np.zeros((self.num_vertices, 3), np.float64)
+        if len(ids):
+            d = eye[None, :] - self.positions[ids].astype(np.float64)
+            n = np.linalg.norm(d, axis=1, keepdims=True)
+            d = np.where(n > 0, d / np.where(n > 0, n, 1.0), self.normals[ids])  # an eye on the vertex looks along n
+            ncoef = coeffs.shape[2]
+            order = int(round(np.sqrt(ncoef)))
+            y = sh.basis(d, order)  # (K, ncoef)
+            rad = np.einsum("kci,ki->kc", coeffs.astype(np.float64), y)  # T-7
+            out[ids] = rad if rad.shape[1] == 3 else np.repeat(rad, 3, axis=1)
+        return (out * self.intensity[None, :]).astype(np.float32)
+
+    def info(self) -> dict:
+        """The summary ``lodprt info --json`` prints."""
+        samples = []
+        for k, pos in enumerate(self.light_positions):
+            a = self.sample_info(k)
+            samples.append(
+                {
+                    "index": k,
+                    "position": [float(x) for x in pos],
+                    "vertices_kept": int(a["vertices_kept"]),
+                    "bytes": int(a["bytes"]),
+                    "seconds": float(a.get("seconds", 0.0)),
+                    "lit": int(a.get("lit", 0)),
+                    "shadowed": int(a.get("shadowed", 0)),
+                    "back_facing": int(a.get("back_facing", 0)),
+                }
+            )
+        keys = (
+            "sh_order",
+            "coefficients_per_vertex",
+            "channels",
+            "bake_seconds",
+            "load_seconds",
+            "device",
+            "source",
+            "mode",
+            "lodprt_version",
+            "format_version",
+        )
+        out = {k: self.attrs.get(k) for k in keys}
+        out["vertices"] = self.num_vertices
+        out["faces"] = int(self.root["scene/faces"].shape[0])
+        out["lights"] = dict(self.root["lights"].attrs)
+        out["samples"] = samples
+        out["bytes_total"] = int(sum(s["bytes"] for s in samples))
+        out["bytes_on_disk"] = int(sum(f.stat().st_size for f in self.path.rglob("*") if f.is_file()))
+        return out
+
+
+def open_store(path: str | os.PathLike) -> Store:
+    """Open a bake store for reading; raises StoreError naming the path when it is not one."""
+    return Store(path)

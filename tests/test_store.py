@@ -1,0 +1,139 @@
+"""Bake store: exact round trip, zarr-only readability, no clobbering, and the CLI on top of it."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lodprt import sh
+from lodprt.bake import _Baker, bake, load_kernels
+from lodprt.errors import StoreError
+from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+from lodprt.store import open_store
+
+LIGHTS = {"grid": [2, 1, 2]}
+
+
+@pytest.fixture(scope="module")
+def small(bunny_path):
+    pos, faces = load_mesh(bunny_path)
+    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), LIGHTS, "lights", "bunny")
+
+
+@pytest.fixture(scope="module")
+def baked(small, tmp_path_factory):
+    path = tmp_path_factory.mktemp("store") / "b.zarr"
+    res = bake(small, path, sh_order=3, device="cpu")
+    return path, res
+
+
+def test_round_trip_exact(small, baked):
+    """What is read back equals, bit for bit, the scene arrays and what the kernels computed for each sample."""
+    path, res = baked
+    store = open_store(path)
+    np.testing.assert_array_equal(store.positions, small.positions.astype(np.float32))
+    np.testing.assert_array_equal(store.faces, small.faces)
+    np.testing.assert_array_equal(store.light_positions, small.lights.positions.astype(np.float32))
+    load_kernels("cpu")
+    ids = np.flatnonzero(small.referenced).astype(np.int32)
+    baker = _Baker(small, 3, "cpu", ids)
+    for k, light in enumerate(small.lights.positions):
+        got_ids, got = store.sample(k)
+        np.testing.assert_array_equal(got_ids, ids)
+        np.testing.assert_array_equal(got, baker.sample(light)[0])
+    assert store.sh_order == 3 and len(res.samples) == 4
+
+
+def test_readable_with_zarr_alone(baked):
+    """docs/FORMAT.md's recipe: zarr + numpy reconstruct the same radiance as Store.radiance."""
+    import zarr
+
+    path, _ = baked
+    root = zarr.open_group(str(path), mode="r")
+    assert root.attrs["format"] == "lodprt" and root.attrs["format_version"] == 1
+    pos = root["scene/positions"][...]
+    ids = root["samples/00001/vertex_ids"][...]
+    coeffs = root["samples/00001/coefficients"][...]
+    eye = np.array([0.0, 0.3, 0.5])
+    d = eye - pos[ids].astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    rad = np.einsum("kci,ki->kc", coeffs, sh.basis(d, root.attrs["sh_order"])) * np.array(root["lights"].attrs["intensity"])
+    ref = open_store(path).radiance(1, eye)
+    np.testing.assert_allclose(ref[ids], rad, rtol=1e-5, atol=1e-6)
+    unref = np.setdiff1d(np.arange(len(pos)), ids)
+    assert (ref[unref] == 0).all()
+
+
+def test_never_clobbers(small, baked, tmp_path):
+    """An existing store is kept without overwrite; a non-store folder is refused even with overwrite."""
+    path, _ = baked
+    before = open_store(path).read("samples/00000/coefficients").copy()
+    with pytest.raises(StoreError, match="already exists"):
+        bake(small, path, sh_order=2, device="cpu")
+    np.testing.assert_array_equal(open_store(path).read("samples/00000/coefficients"), before)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("precious")
+    with pytest.raises(StoreError, match="not a lodprt store"):
+        bake(small, mine, sh_order=2, device="cpu", overwrite=True)
+    assert (mine / "thesis.tex").read_text() == "precious"
+    assert not list(tmp_path.glob("*.partial-*"))
+
+
+def test_overwrite_replaces_a_store(small, tmp_path):
+    """With overwrite a store is replaced by the new bake, and no partial folder is left behind."""
+    path = tmp_path / "o.zarr"
+    bake(small, path, sh_order=2, device="cpu")
+    bake(small, path, sh_order=3, device="cpu", overwrite=True)
+    assert open_store(path).sh_order == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.zarr"]
+
+
+def test_open_errors(tmp_path):
+    """Opening a missing path or a folder that is not a store names the path."""
+    with pytest.raises(StoreError, match="no such store"):
+        open_store(tmp_path / "missing.zarr")
+    with pytest.raises(StoreError, match="not a lodprt store"):
+        open_store(tmp_path)
+
+
+def lodprt(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "lodprt.cli", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+
+
+def test_cli_bake_info_radiance(tmp_path, bunny_path):
+    """lodprt bake / info --json / radiance work end to end on a TOML scene with the shared bunny."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text(
+        f'[[object]]\nmesh = "{bunny_path.as_posix()}"\n[floor]\nresolution = 20\n[lights]\ngrid = [2, 1, 1]\n'
+    )
+    out = tmp_path / "b.zarr"
+    r = lodprt("bake", scene, "-o", out, "--sh-order", "3", "--device", "cpu")
+    assert r.returncode == 0, r.stderr
+    r = lodprt("info", out, "--json")
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["vertices"] == 35947 + 400 and info["sh_order"] == 3 and info["bake_seconds"] > 0
+    assert [s["index"] for s in info["samples"]] == [0, 1]
+    assert all(s["vertices_kept"] == 34834 + 400 and s["bytes"] == s["vertices_kept"] * (4 + 9 * 4) for s in info["samples"])
+    rad = tmp_path / "rad.npy"
+    r = lodprt("radiance", out, "--sample", "1", "--eye", "0", "0.3", "0.6", "-o", rad)
+    assert r.returncode == 0, r.stderr
+    arr = np.load(rad)
+    assert arr.shape == (info["vertices"], 3) and arr.dtype == np.float32 and np.isfinite(arr).all()
+    np.testing.assert_array_equal(arr, open_store(out).radiance(1, (0, 0.3, 0.6)))
+    # the second bake into the same path is refused with a clear one-line error
+    r = lodprt("bake", scene, "-o", out)
+    assert r.returncode == 2 and "already exists" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cli_errors_are_one_line(tmp_path):
+    """Bad scene, bad sample index and unknown device give exit code 2 and a message naming the culprit."""
+    r = lodprt("bake", tmp_path / "none.obj", "-o", tmp_path / "x.zarr")
+    assert r.returncode == 2 and "none.obj" in r.stderr and "Traceback" not in r.stderr
+    r = lodprt("bake", "demo", "-o", tmp_path / "x.zarr", "--device", "tpu")
+    assert r.returncode == 2 and "tpu" in r.stderr
+    r = lodprt("info", tmp_path)
+    assert r.returncode == 2 and "not a lodprt store" in r.stderr
