@@ -88,7 +88,7 @@ def main():
         "warp_threaded_mrays_per_s": total["rays"] / threaded / 1e6,
         "warp_threads": jobs,
         "embree_mrays_per_s": total["rays"] / total["embree"] / 1e6,
-        "embree_over_warp_time": total["embree"] / total["warp"],
+        "warp_over_embree_throughput": total["embree"] / total["warp"],
         "warp_bvh_build_s": bvh_seconds,
         "embree_build_s": embree_build,
         "max_disagreement": max(r["disagree"] for r in rows),
@@ -96,11 +96,11 @@ def main():
     }
     print(f"{scene.source}: {scene.num_vertices:,} vertices, {len(scene.faces):,} triangles, {len(lights)} samples, device {device}")
     print(table(rows, [("sample", "sample", "d"), ("rays", "rays", ","), ("warp_mrays", "warp Mray/s", ".2f"),
-                       ("embree_mrays", "embree Mray/s", ".2f"), ("ratio", "warp speed-up", ".2f"),
+                       ("embree_mrays", "embree Mray/s", ".2f"), ("ratio", "warp/embree", ".2f"),
                        ("disagree", "disagree", ".2e"), ("shadowed", "shadowed", ".4f")]))
     print(f"total: Warp {summary['warp_mrays_per_s']:.2f} Mrays/s (1 launch at a time), "
           f"{summary['warp_threaded_mrays_per_s']:.2f} Mrays/s ({jobs} threads), Embree {summary['embree_mrays_per_s']:.2f} "
-          f"Mrays/s; Warp/Embree throughput ratio {1 / summary['embree_over_warp_time']:.2f}")
+          f"Mrays/s; Warp/Embree throughput {summary['warp_over_embree_throughput']:.2f}x")
     results = {"benchmark": "visibility", "quick": args.quick, "scene": scene.source, "environment": environment(device),
                "summary": summary, "samples": rows}
     print("wrote", write("visibility" + ("-quick" if args.quick else ""), results, args.json))

@@ -158,3 +158,27 @@ def test_layout_leaves_out_what_the_scene_does_not_need(tmp_path, device):
     ratio = (c[:, 0, 0] - c[:, 1, 0]) / (c[:, 1, 0] - c[:, 2, 0])
     np.testing.assert_allclose(ratio, (0.6 - 0.3) / (0.3 - 0.15), rtol=1e-4)
     np.testing.assert_allclose(c[:, 0, 1:], c[:, 2, 1:], rtol=1e-6)
+
+
+def test_grazing_light_is_finite(device):
+    """A light in (or a hair above) the plane of a flat patch: finite, equal to the float64 closed form (specular only)."""
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1.0]])
+    scene = _assemble([("quad", pos, np.array([[0, 2, 1], [1, 2, 3]]), THESIS_MATERIAL)], None, {}, "lights", "quad")
+    for light in (np.array([3.0, 0.0, 0.5]), np.array([3.0, 1e-6, 0.5])):
+        coeffs, vis = bake_one(scene, device, 4, light)
+        assert np.isfinite(coeffs).all()
+        ref = reference.phong_coefficients(scene, light, 4, vis)
+        np.testing.assert_allclose(coeffs[:, 0], ref, atol=1e-6)
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1e4])
+def test_bake_scales_with_the_scene(device, bunny_path, scale):
+    """Scaling the scene by s scales every coefficient by 1/s^2 (inverse-square falloff) and keeps visibility."""
+    pos, faces = load_mesh(bunny_path)
+    ref = _assemble([("b", pos, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), {}, "lights", "b")
+    big = _assemble([("b", pos * scale, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), {}, "lights", "b")
+    c1, v1 = bake_one(ref, device, 4, ref.lights.positions[4])
+    c2, v2 = bake_one(big, device, 4, big.lights.positions[4])
+    assert np.mean(v1 != v2) < 1e-3
+    same = (v1 == v2)
+    np.testing.assert_allclose(c2[same] * scale**2, c1[same], rtol=2e-4, atol=1e-4 * np.abs(c1).max())
