@@ -658,9 +658,9 @@ class Cut:
                 raise LodprtError(f"forced refinement of node {k} failed")  # cannot happen: rule checked above
             stack.pop()
 
-    def triangles(self) -> np.ndarray:
+    def triangles(self, *, return_index: bool = False):
         """Faces of the cut's mesh in original vertex ids (vertex of each active ancestor), degenerate ones dropped."""
-        return triangulate(self.h, self.faces, self.anc)
+        return triangulate(self.h, self.faces, self.anc, return_index=return_index)
 
 
 def active_ancestors(h: Hierarchy, active: np.ndarray) -> np.ndarray:
@@ -688,8 +688,13 @@ def active_ancestors(h: Hierarchy, active: np.ndarray) -> np.ndarray:
     return result.astype(np.int32)
 
 
-def triangulate(h: Hierarchy, faces: np.ndarray, anc: np.ndarray) -> np.ndarray:
-    """Original faces mapped through each vertex's active ancestor (T-3.2), degenerate faces dropped, vectorised."""
+def triangulate(h: Hierarchy, faces: np.ndarray, anc: np.ndarray, *, return_index: bool = False):
+    """Original faces mapped through each vertex's active ancestor (T-3.2), degenerate faces dropped, vectorised.
+
+    Returns (M, 3) int32 original vertex ids; with ``return_index`` also the (M,) original face of each.
+    """
     f = h.vertex[anc[np.asarray(faces, np.int64)]]
     keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+    if return_index:
+        return f[keep].astype(np.int32), np.flatnonzero(keep)
     return f[keep].astype(np.int32)

@@ -1,0 +1,277 @@
+"""Vertex hierarchy: structure, cones, triangulation, dependency rules and fold-over-free random walks."""
+
+import numpy as np
+import pytest
+
+from lodprt.errors import LodprtError
+from lodprt.hierarchy import Cut, Hierarchy, active_ancestors, build_hierarchy, pymeshlab_levels, triangulate
+from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh, vertex_normals
+
+
+@pytest.fixture(scope="module")
+def scene(bunny_path):
+    pos, faces = load_mesh(bunny_path)
+    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
+
+
+@pytest.fixture(scope="module")
+def hier(scene):
+    return build_hierarchy(scene.positions, scene.faces, scene.normals)
+
+
+def build(pos, faces):
+    pos = np.asarray(pos, float)
+    faces = np.asarray(faces)
+    return build_hierarchy(pos, faces, vertex_normals(pos, faces))
+
+
+def face_normals(pos, tri):
+    return np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]])
+
+
+def test_leaves_roots_and_binary_nodes(scene, hier):
+    """Leaves are exactly the original vertices, every internal node has two children, roots are the base mesh."""
+    h = hier
+    V = scene.num_vertices
+    assert (h.children[:V] == -1).all()
+    assert (h.children[V:] >= 0).all() and (h.children[V:, 0] != h.children[V:, 1]).all()
+    # each node is the child of at most one parent, and children were created before their parent
+    kids = h.children[V:].ravel()
+    assert len(np.unique(kids)) == len(kids)
+    assert (kids < np.repeat(np.arange(V, h.num_nodes), 2)).all()
+    np.testing.assert_array_equal(h.parent[h.children[V:, 0]], np.arange(V, h.num_nodes))
+    # half-edge collapses: the parent stands where its first child stands, at an original vertex
+    np.testing.assert_array_equal(h.vertex[V:], h.vertex[h.children[V:, 0]])
+    np.testing.assert_array_equal(h.vertex[:V], np.arange(V))
+    assert h.num_nodes == 2 * V - len(h.roots)
+    unref = np.flatnonzero(~scene.referenced)
+    assert (h.parent[unref] == -1).all()  # unreferenced vertices are isolated roots
+    assert len(h.roots) < V / 10
+
+
+def test_leaf_normals_inside_every_ancestor_cone(scene, hier):
+    """Every leaf normal lies inside the normal cone of each of its ancestors (to 1e-5 rad)."""
+    h = hier
+    axis = h.cone_axis.astype(np.float64)
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    idx = np.arange(scene.num_vertices)
+    cur = h.parent[idx].astype(np.int64)
+    while (cur >= 0).any():
+        live = cur >= 0
+        i, c = idx[live], cur[live]
+        a, n = axis[c], scene.normals[i]
+        ang = np.arctan2(np.linalg.norm(np.cross(a, n), axis=1), (a * n).sum(1))  # well conditioned near 0
+        assert (ang <= h.cone_half_angle[c] + 1e-5).all()
+        cur = np.where(live, h.parent[np.maximum(cur, 0)], -1)
+
+
+def test_radius_covers_leaves(scene, hier):
+    """The bounding sphere of sampled nodes holds every leaf position below them."""
+    h = hier
+    for k in np.random.default_rng(0).choice(np.arange(scene.num_vertices, h.num_nodes), 300, replace=False):
+        d = np.linalg.norm(scene.positions[h.leaves(k)] - scene.positions[h.vertex[k]], axis=1)
+        assert d.max() <= h.radius[k] * (1 + 1e-6) + 1e-12
+
+
+def test_full_cut_triangulates_to_original_and_base_is_valid(scene, hier):
+    """The all-leaves cut gives back exactly the original faces; the base cut a mesh of base vertices, no repeats."""
+    full = Cut.full(hier, scene.faces)
+    tri, idx = full.triangles(return_index=True)
+    np.testing.assert_array_equal(tri, scene.faces)
+    base = Cut.base(hier, scene.faces)
+    t = base.triangles()
+    assert len(t) > 0
+    assert np.isin(t, hier.vertex[hier.roots]).all()
+    assert len(np.unique(np.sort(t, axis=1), axis=0)) == len(t)  # no duplicated triangles
+    # base faces keep the orientation of the surface: the floor's faces all point up
+    floor_faces = t[np.isin(t, np.flatnonzero(scene.object_id == 1)).all(1)]
+    assert (face_normals(scene.positions, floor_faces)[:, 1] > 0).all()
+
+
+def test_error_vector_flat_floor_zero_curved_bunny_not(scene, hier):
+    """Collapses inside the flat floor have ~zero geometric error; on the curved bunny they do not."""
+    h = hier
+    V = scene.num_vertices
+    collapsed = h.vertex[h.children[V:, 1]]  # the vertex that disappeared
+    on_floor = scene.object_id[collapsed] == 1
+    size = scene.diagonal
+    err = np.linalg.norm(h.error_vector[V:], axis=1)
+    assert err[on_floor].max() < 1e-6 * size
+    assert np.median(err[~on_floor]) > 1e-6 * size
+    # and p - p' leaves p' on the simplified surface below p: |e| is at most the distance to the survivor
+    dist = np.linalg.norm(scene.positions[collapsed] - scene.positions[h.vertex[V:]], axis=1)
+    assert (err <= dist + 1e-9).all()
+
+
+def test_collapsed_neighbours_recorded(scene, hier):
+    """Each internal node records the collapsed vertex's neighbours before the collapse, the survivor among them."""
+    h = hier
+    V = scene.num_vertices
+    for k in range(V, h.num_nodes, 997):
+        nb = h.collapsed_neighbours(k)
+        assert len(nb) >= 2 and h.vertex[k] in nb
+        assert h.vertex[h.children[k, 1]] not in nb
+
+
+def test_to_from_arrays_exact(hier):
+    """to_arrays / from_arrays round trip bit for bit."""
+    back = Hierarchy.from_arrays(hier.to_arrays())
+    for name, a in hier.to_arrays().items():
+        b = getattr(back, name)
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+
+
+def independent_neighbours(h, faces, anc, node):
+    """Active nodes sharing an original edge with node's leaves (from the face list, no CSR)."""
+    f = anc[np.asarray(faces)]
+    rows = (f == node).any(1)
+    nb = np.unique(f[rows])
+    return nb[nb != node]
+
+
+@pytest.mark.parametrize("start", ["base", "full"])
+def test_random_walks_keep_rules_and_never_fold(scene, hier, start):
+    """Thousands of legal refine/coarsen steps: rules agree with independent neighbours, no face ever flips."""
+    h = hier
+    cut = Cut.base(h, scene.faces) if start == "base" else Cut.full(h, scene.faces)
+    rng = np.random.default_rng(7)
+    pos = scene.positions
+    faces = scene.faces
+    # faces around each original vertex, to look only at what a step touches
+    order = np.argsort(faces.ravel(), kind="stable")
+    vptr = np.searchsorted(faces.ravel()[order], np.arange(scene.num_vertices + 1))
+    def touched_faces(node):
+        leaves = h.leaves(node)
+        return np.unique(order[np.concatenate([np.arange(vptr[v], vptr[v + 1]) for v in leaves])] // 3)
+
+    def assert_no_flip(before, after):
+        ok = lambda t: (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])  # noqa: E731
+        both = ok(before) & ok(after)
+        dots = (face_normals(pos, before[both]) * face_normals(pos, after[both])).sum(1)
+        assert (dots >= 0).all(), f"step {steps}: a triangle flipped"
+
+    steps = attempts = forced = 0
+    while steps < 1500 and attempts < 60000:
+        attempts += 1
+        act = np.flatnonzero(cut.active)
+        k = int(rng.choice(act))
+        refine = rng.random() < (0.65 if start == "base" else 0.4)
+        node = k if refine else int(h.parent[k])
+        if node < 0 or h.children[node, 0] < 0:
+            continue
+        touched = touched_faces(node)
+        before = h.vertex[cut.anc[faces[touched]]]
+        nb = independent_neighbours(h, faces[touched], cut.anc, node)
+        if refine:
+            allowed = cut.active[node] and (h.creation[nb] < h.creation[node]).all()
+            assert cut.refine(node) == allowed
+            if not allowed and cut.active[node] and rng.random() < 0.3:
+                # forced refinement, split by split: first what the split needs, each split checked for flips
+                stack = [node]
+                while stack:
+                    k = stack[-1]
+                    if not cut.active[k]:
+                        stack.pop()
+                        continue
+                    blockers = cut.blockers_of_refine(k)
+                    if len(blockers):
+                        stack.extend(int(b) for b in blockers)
+                        continue
+                    touched_k = touched_faces(k)
+                    before_k = h.vertex[cut.anc[faces[touched_k]]]
+                    assert cut.refine(k)
+                    assert_no_flip(before_k, h.vertex[cut.anc[faces[touched_k]]])
+                    stack.pop()
+                    forced += 1
+                continue
+        else:
+            c0, c1 = h.children[node]
+            if not (cut.active[c0] and cut.active[c1]):
+                assert not cut.coarsen(node)
+                continue
+            f = cut.anc[faces[touched]]
+            nb = np.unique(f[(np.isin(f, [c0, c1])).any(1)])
+            nb = nb[(nb != c0) & (nb != c1)]
+            par = h.parent[nb]
+            later = np.where(par < 0, np.iinfo(np.int32).max, h.creation[np.maximum(par, 0)])
+            allowed = bool((later > h.creation[node]).all())
+            assert cut.coarsen(node) == allowed
+        if not allowed:
+            continue
+        steps += 1
+        assert_no_flip(before, h.vertex[cut.anc[faces[touched]]])
+    assert steps == 1500
+    assert start == "full" or forced > 0
+    active_ancestors(h, cut.active)  # still a valid front (raises otherwise)
+    np.testing.assert_array_equal(cut.anc, active_ancestors(h, cut.active))
+
+
+def test_forced_refinement_from_base(scene, hier):
+    """Forcing the split of a leaf's parent from the base cut succeeds, activates the leaf, and leaves a legal cut."""
+    h = hier
+    cut = Cut.base(h, scene.faces)
+    p = scene.num_vertices  # the first collapse: the finest internal node, deep below a root
+    deep = int(h.children[p, 1])
+    cut.force_refine(p)
+    assert cut.active[deep]
+    np.testing.assert_array_equal(cut.anc, active_ancestors(h, cut.active))
+    with pytest.raises(LodprtError, match="leaf"):
+        cut.force_refine(deep)
+
+
+def test_invalid_front_rejected(hier):
+    """A node set that is not a front (a vertex with two active ancestors) is refused."""
+    a = np.zeros(hier.num_nodes, bool)
+    a[hier.roots] = True
+    a[: hier.num_vertices] = True
+    with pytest.raises(LodprtError, match="not a valid cut"):
+        active_ancestors(hier, a)
+
+
+def test_pymeshlab_survivors_bit_identical(scene):
+    """With optimalplacement=False pymeshlab keeps survivors at bit-identical positions; levels are nested."""
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=scene.positions, face_matrix=scene.faces,
+                               v_scalar_array=np.arange(scene.num_vertices, dtype=np.float64)))
+    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=len(scene.faces) // 2, optimalplacement=False,
+                                                preservetopology=True, autoclean=True)
+    m = ms.current_mesh()
+    ids = np.rint(m.vertex_scalar_array()).astype(int)
+    np.testing.assert_array_equal(m.vertex_matrix(), scene.positions[ids])
+    level, n = pymeshlab_levels(scene.positions, scene.faces)
+    assert n >= 5
+    counts = [(level == 0).sum() + (level > k).sum() for k in range(n + 1)]
+    assert all(a >= b for a, b in zip(counts, counts[1:]))  # nested: survivors only shrink
+
+
+def test_small_and_awkward_meshes():
+    """A single triangle, two components, duplicated vertices and a non-manifold edge build and triangulate."""
+    h = build([[0, 0, 0], [1, 0, 0], [0, 0, 1]], [[0, 2, 1]])
+    assert h.num_nodes >= 3 and len(Cut.base(h, [[0, 2, 1]]).triangles()) <= 1
+    g = np.stack(np.meshgrid(np.arange(6.0), np.arange(6.0), indexing="ij"), -1).reshape(-1, 2)
+    pos = np.c_[g[:, 0], np.zeros(36), g[:, 1]]
+    i, j = np.meshgrid(np.arange(5), np.arange(5), indexing="ij")
+    a = (i * 6 + j).ravel()
+    quad = np.r_[np.c_[a, a + 1, a + 6], np.c_[a + 1, a + 7, a + 6]]
+    two_pos = np.r_[pos, pos + [0, 1, 0]]
+    two = np.r_[quad, quad + 36]
+    h = build(two_pos, two)
+    t = Cut.base(h, two).triangles()
+    assert not (np.isin(t, np.arange(36)).any(1) & np.isin(t, np.arange(36, 72)).any(1)).any()  # never merged
+    # duplicated vertex (same position, own id) and a fin on one edge (non-manifold)
+    dup_pos = np.r_[pos, pos[[7]], [[1, 1, 1]]]
+    fin = np.r_[quad, [[36, 8, 14]], [[7, 8, 37]]]
+    h = build(dup_pos, fin)
+    assert np.isfinite(h.cone_axis).all() and np.isfinite(h.error_vector).all()
+    np.testing.assert_array_equal(Cut.full(h, fin).triangles(), fin)
+
+
+def test_bad_input_is_refused():
+    """Out-of-range faces and NaN positions raise LodprtError, not a deep traceback."""
+    with pytest.raises(LodprtError, match="faces"):
+        build_hierarchy(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((3, 3)))
+    with pytest.raises(LodprtError, match="non-finite"):
+        build_hierarchy(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), np.zeros((3, 3)))
