@@ -47,6 +47,7 @@ class BakeResult:
     load_seconds: float
     device: str
     samples: list[dict]
+    hierarchy_seconds: float | None = None
 
 
 def ray_offset(scene: Scene) -> float:
@@ -185,11 +186,15 @@ def bake(
     device: str | None = None,
     overwrite: bool = False,
     jobs: int | None = None,
+    hierarchy: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    hierarchy_progress: Callable[[int, int], None] | None = None,
 ) -> BakeResult:
     """Bake every referenced vertex of ``scene`` for every light sample and write the store at ``out``.
 
-    ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample.
+    With ``hierarchy`` the vertex hierarchy (``lodprt.hierarchy``) is built first and stored under ``hierarchy/``.
+    ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample,
+    ``hierarchy_progress(collapses, total)`` while the hierarchy is built.
     Raises StoreError before any work when ``out`` exists and ``overwrite`` is false.
     """
     device = resolve_device(device)
@@ -205,6 +210,18 @@ def bake(
         jobs = max(1, min(jobs, len(lights)))
         if writer is not None:
             _write_scene(writer, scene, baker)
+        hierarchy_seconds = None
+        if hierarchy:
+            from lodprt.hierarchy import build_hierarchy
+
+            t_h = time.perf_counter()
+            tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=hierarchy_progress)
+            hierarchy_seconds = time.perf_counter() - t_h
+            if writer is not None:
+                for name, arr in tree.to_arrays().items():
+                    writer.array(f"hierarchy/{name}", arr, chunk_rows=1 << 18)
+                writer.attrs("hierarchy", levels=tree.levels, seconds=hierarchy_seconds, roots=int(len(tree.roots)),
+                             depth=tree.depth)
         samples: list[dict] = [{} for _ in lights]
 
         def run(k: int):
@@ -233,7 +250,8 @@ def bake(
                     writer.attrs(g, **info)
                 if progress is not None:
                     progress(done, len(lights))
-        bake_seconds = time.perf_counter() - t0
+        # bake_seconds counts the light samples and the store; the hierarchy reports its own time
+        bake_seconds = time.perf_counter() - t0 - (hierarchy_seconds or 0.0)
         result = BakeResult(
             path=None if out is None else str(out),
             sh_order=sh_order,
@@ -243,6 +261,7 @@ def bake(
             load_seconds=load_seconds,
             device=device,
             samples=samples,
+            hierarchy_seconds=hierarchy_seconds,
         )
         if writer is not None:
             writer.attrs(
@@ -258,6 +277,7 @@ def bake(
                 device=device,
                 source=scene.source,
                 ray_offset=baker.offset,
+                hierarchy_seconds=hierarchy_seconds,
             )
             writer.commit()
         return result

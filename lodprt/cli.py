@@ -46,6 +46,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--full", action="store_true", help="keep every vertex (the only mode until the hierarchy lands)")
     b.add_argument("--jobs", type=int, default=None, metavar="J", help="CPU threads, one light sample each (default: all cores)")
     b.add_argument("--overwrite", action="store_true", help="replace OUT if it is an existing lodprt store")
+    b.add_argument("--no-hierarchy", action="store_true", help="skip building the vertex hierarchy (faster; no LOD later)")
 
     i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds.")
     i.add_argument("store", metavar="OUT.zarr")
@@ -83,21 +84,36 @@ def _cmd_bake(args) -> int:
         f"{len(scene.faces):,} triangles, {n} light samples",
         file=sys.stderr,
     )
-    bar = tqdm(total=n, unit="sample", desc="bake", file=sys.stderr)
+    bars = {}
 
-    def progress(done, total):
-        bar.update(done - bar.n)
+    def bar_for(name, unit):
+        def update(done, total):
+            if name not in bars:
+                bars[name] = tqdm(total=total, unit=unit, desc=name, file=sys.stderr)
+            bars[name].update(done - bars[name].n)
+
+        return update
 
     try:
         res = bake(
-            scene, args.out, sh_order=args.sh_order, device=device, overwrite=args.overwrite, jobs=args.jobs, progress=progress
+            scene,
+            args.out,
+            sh_order=args.sh_order,
+            device=device,
+            overwrite=args.overwrite,
+            jobs=args.jobs,
+            hierarchy=not args.no_hierarchy,
+            progress=bar_for("bake", "sample"),
+            hierarchy_progress=bar_for("hierarchy", "collapse"),
         )
     finally:
-        bar.close()
+        for b in bars.values():
+            b.close()
     kb = np.mean([s["bytes"] for s in res.samples]) / 1024
     print(
         f"wrote {res.path}: {res.coefficients_per_vertex} coefficient(s) x {res.channels} channel(s) per vertex, "
-        f"{kb:,.0f} KiB per sample, bake {res.bake_seconds:.2f} s on {res.device} (+{res.load_seconds:.2f} s kernel load)"
+        f"{kb:,.0f} KiB per sample, bake {res.bake_seconds:.2f} s on {res.device} (+{res.load_seconds:.2f} s kernel load"
+        + (f", +{res.hierarchy_seconds:.1f} s hierarchy)" if res.hierarchy_seconds is not None else ")")
     )
     return 0
 
@@ -114,6 +130,9 @@ def _cmd_info(args) -> int:
     print(
         f"  SH order {info['sh_order']}: {info['coefficients_per_vertex']} coefficient(s) x {info['channels']} channel(s)"
     )
+    if info["hierarchy_nodes"] is not None:
+        print(f"  hierarchy {info['hierarchy_nodes']:,} nodes, {info['hierarchy_roots']:,} roots, depth "
+              f"{info['hierarchy_depth']}, built in {info['hierarchy_seconds']:.1f} s")
     print(f"  bake {info['bake_seconds']:.2f} s on {info['device']}; {info['bytes_total'] / 1024:,.0f} KiB payload, "
           f"{info['bytes_on_disk'] / 1024:,.0f} KiB on disk")
     print(f"  {'sample':>6} {'position':>30} {'kept':>9} {'lit':>9} {'shadowed':>9} {'KiB':>9}")

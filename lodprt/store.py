@@ -186,6 +186,20 @@ class Store:
             out[ids] = rad if rad.shape[1] == 3 else np.repeat(rad, 3, axis=1)
         return (out * self.intensity[None, :]).astype(np.float32)
 
+    @property
+    def has_hierarchy(self) -> bool:
+        return "hierarchy" in self.root
+
+    def hierarchy(self):
+        """The stored vertex hierarchy (``lodprt.hierarchy.Hierarchy``); StoreError when the bake made none."""
+        from lodprt.hierarchy import Hierarchy
+
+        if not self.has_hierarchy:
+            raise StoreError(f"{self.path}: no hierarchy/ group (baked with --no-hierarchy)")
+        g = self.root["hierarchy"]
+        arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS}
+        return Hierarchy.from_arrays(arrays, levels=int(g.attrs.get("levels", 0)), build_seconds=float(g.attrs.get("seconds", 0.0)))
+
     def info(self) -> dict:
         """The summary ``lodprt info --json`` prints."""
         samples = []
@@ -220,6 +234,14 @@ class Store:
         out["faces"] = int(self.root["scene/faces"].shape[0])
         out["lights"] = dict(self.root["lights"].attrs)
         out["samples"] = samples
+        if self.has_hierarchy:
+            g = self.root["hierarchy"]
+            out["hierarchy_nodes"] = int(g["parent"].shape[0])
+            out["hierarchy_roots"] = int(g.attrs["roots"])
+            out["hierarchy_depth"] = int(g.attrs["depth"])
+            out["hierarchy_seconds"] = float(g.attrs["seconds"])
+        else:
+            out["hierarchy_nodes"] = out["hierarchy_roots"] = out["hierarchy_depth"] = out["hierarchy_seconds"] = None
         out["bytes_total"] = int(sum(s["bytes"] for s in samples))
         out["bytes_on_disk"] = int(sum(f.stat().st_size for f in self.path.rglob("*") if f.is_file()))
         return out

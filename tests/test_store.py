@@ -25,7 +25,7 @@ def small(bunny_path):
 @pytest.fixture(scope="module")
 def baked(small, tmp_path_factory):
     path = tmp_path_factory.mktemp("store") / "b.zarr"
-    res = bake(small, path, sh_order=3, device="cpu")
+    res = bake(small, path, sh_order=3, device="cpu")  # with the hierarchy
     return path, res
 
 
@@ -44,6 +44,21 @@ def test_round_trip_exact(small, baked):
         np.testing.assert_array_equal(got_ids, ids)
         np.testing.assert_array_equal(got, baker.sample(light)[0])
     assert store.sh_order == 3 and len(res.samples) == 4
+
+
+def test_hierarchy_stored_and_reported(small, baked):
+    """The bake stores the vertex hierarchy bit for bit and info reports its nodes, roots and build time."""
+    from lodprt.hierarchy import build_hierarchy
+
+    path, res = baked
+    store = open_store(path)
+    stored = store.hierarchy()
+    fresh = build_hierarchy(small.positions, small.faces, small.normals)  # deterministic: same tree again
+    for name, arr in fresh.to_arrays().items():
+        np.testing.assert_array_equal(getattr(stored, name), arr)
+    info = store.info()
+    assert info["hierarchy_nodes"] == fresh.num_nodes and info["hierarchy_roots"] == len(fresh.roots)
+    assert info["hierarchy_seconds"] > 0 and res.hierarchy_seconds == info["hierarchy_seconds"]
 
 
 def test_readable_with_zarr_alone(baked):
@@ -71,13 +86,13 @@ def test_never_clobbers(small, baked, tmp_path):
     path, _ = baked
     before = open_store(path).read("samples/00000/coefficients").copy()
     with pytest.raises(StoreError, match="already exists"):
-        bake(small, path, sh_order=2, device="cpu")
+        bake(small, path, sh_order=2, device="cpu", hierarchy=False)
     np.testing.assert_array_equal(open_store(path).read("samples/00000/coefficients"), before)
     mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "thesis.tex").write_text("precious")
     with pytest.raises(StoreError, match="not a lodprt store"):
-        bake(small, mine, sh_order=2, device="cpu", overwrite=True)
+        bake(small, mine, sh_order=2, device="cpu", overwrite=True, hierarchy=False)
     assert (mine / "thesis.tex").read_text() == "precious"
     assert not list(tmp_path.glob("*.partial-*"))
 
@@ -85,8 +100,8 @@ def test_never_clobbers(small, baked, tmp_path):
 def test_overwrite_replaces_a_store(small, tmp_path):
     """With overwrite a store is replaced by the new bake, and no partial folder is left behind."""
     path = tmp_path / "o.zarr"
-    bake(small, path, sh_order=2, device="cpu")
-    bake(small, path, sh_order=3, device="cpu", overwrite=True)
+    bake(small, path, sh_order=2, device="cpu", hierarchy=False)
+    bake(small, path, sh_order=3, device="cpu", overwrite=True, hierarchy=False)
     assert open_store(path).sh_order == 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.zarr"]
 
@@ -110,13 +125,14 @@ def test_cli_bake_info_radiance(tmp_path, bunny_path):
         f'[[object]]\nmesh = "{bunny_path.as_posix()}"\n[floor]\nresolution = 20\n[lights]\ngrid = [2, 1, 1]\n'
     )
     out = tmp_path / "b.zarr"
-    r = lodprt("bake", scene, "-o", out, "--sh-order", "3", "--device", "cpu")
+    r = lodprt("bake", scene, "-o", out, "--sh-order", "3", "--device", "cpu", "--no-hierarchy")
     assert r.returncode == 0, r.stderr
     r = lodprt("info", out, "--json")
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
     assert info["vertices"] == 35947 + 400 and info["sh_order"] == 3 and info["bake_seconds"] > 0
     assert [s["index"] for s in info["samples"]] == [0, 1]
+    assert info["hierarchy_nodes"] is None
     assert all(s["vertices_kept"] == 34834 + 400 and s["bytes"] == s["vertices_kept"] * (4 + 9 * 4) for s in info["samples"])
     rad = tmp_path / "rad.npy"
     r = lodprt("radiance", out, "--sample", "1", "--eye", "0", "0.3", "0.6", "-o", rad)
