@@ -16,6 +16,7 @@ from __future__ import annotations
 import concurrent.futures
 import dataclasses
 import logging
+import math
 import os
 import threading
 import time
@@ -135,20 +136,19 @@ class _Baker:
         )
         return s["visible"]
 
-    def sample(self, light: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bake one light sample: (coefficients (K, C, ncoef) float32, visibility (K,) uint8)."""
+    def shade(self, light: np.ndarray, ids, visible, basis, coeffs) -> None:
+        """Phong SH coefficients of vertices ``ids`` (device arrays, ``visible`` aligned with ``ids``)."""
         from lodprt.kernels import shading as kshade
 
-        wp, s = self.wp, self._scratch()
-        visible = self.visibility(light)
+        wp = self.wp
         wp.launch(
             kshade.phong_sh,
-            dim=len(self.ids_host),
+            dim=ids.shape[0],
             inputs=[
                 self.points,
                 self.normals,
                 self.material_id,
-                self.ids,
+                ids,
                 visible,
                 self.kd,
                 self.ks,
@@ -157,13 +157,45 @@ class _Baker:
                 self.falloff,
                 self.radius,
                 self.sh_order,
-                s["basis"],
+                basis,
             ],
-            outputs=[s["coeffs"]],
+            outputs=[coeffs],
             device=self.device,
         )
+
+    def sample(self, light: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bake one light sample at full resolution: (coefficients (K, C, ncoef) float32, visibility (K,) uint8)."""
+        s = self._scratch()
+        visible = self.visibility(light)
+        self.shade(light, self.ids, visible, s["basis"], s["coeffs"])
         # .numpy() is a view of device memory on the CPU: copy, the next sample on this thread reuses it
         return s["coeffs"].numpy().copy(), visible.numpy().copy()
+
+    def sample_cut(self, light: np.ndarray, lightcut, threshold_deg: float):
+        """Bake one light sample on its light cut (thesis figure 8).
+
+        Returns (vertex ids (K,) int32 of the cut, coefficients (K, C, ncoef), visibility of all baked-for-visibility
+        vertices (len(self.ids),) uint8).
+        """
+        wp = self.wp
+        vis = self.visibility(light).numpy().copy()
+        V = self.points.shape[0]
+        full = np.full(V, 2, np.uint8)  # vertices no face uses: dark, never kept
+        full[self.ids_host] = vis
+        active = lightcut.cut(self.normals, wp.array(full, dtype=wp.uint8, device=self.device), light, threshold_deg)
+        ids = np.unique(lightcut.h.vertex[active])
+        ids = ids[np.isin(ids, self.ids_host)].astype(np.int32)
+        k = len(ids)
+        basis = wp.zeros((k, self.sh_order * self.sh_order), dtype=wp.float32, device=self.device)
+        coeffs = wp.zeros((k, self.channels, self.ncoef), dtype=wp.float32, device=self.device)
+        self.shade(
+            light,
+            wp.array(ids, dtype=wp.int32, device=self.device),
+            wp.array(full[ids], dtype=wp.uint8, device=self.device),
+            basis,
+            coeffs,
+        )
+        return ids, coeffs.numpy().copy(), vis
 
 
 def load_kernels(device: str) -> float:
@@ -173,7 +205,9 @@ def load_kernels(device: str) -> float:
 
     wp = warp()
     t0 = time.perf_counter()
-    for module in (kvis, kshade):
+    from lodprt.kernels import cut as kcut
+
+    for module in (kvis, kshade, kcut):
         wp.load_module(module, device=device)
     return time.perf_counter() - t0
 
@@ -187,17 +221,26 @@ def bake(
     overwrite: bool = False,
     jobs: int | None = None,
     hierarchy: bool = True,
+    threshold_deg: float | None = None,
+    tree=None,
     progress: Callable[[int, int], None] | None = None,
     hierarchy_progress: Callable[[int, int], None] | None = None,
 ) -> BakeResult:
-    """Bake every referenced vertex of ``scene`` for every light sample and write the store at ``out``.
+    """Bake light samples of ``scene`` and write the store at ``out``.
 
-    With ``hierarchy`` the vertex hierarchy (``lodprt.hierarchy``) is built first and stored under ``hierarchy/``.
+    ``threshold_deg=None`` bakes every referenced vertex (full resolution); a number bakes, per sample, only the
+    vertices of the light-dependent cut with that incident-angle threshold (``lodprt.cut``; needs the hierarchy).
+    With ``hierarchy`` the vertex hierarchy (``lodprt.hierarchy``) is built first (or ``tree`` is used) and
+    stored under ``hierarchy/``.
     ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample,
     ``hierarchy_progress(collapses, total)`` while the hierarchy is built.
     Raises StoreError before any work when ``out`` exists and ``overwrite`` is false.
     """
     device = resolve_device(device)
+    if threshold_deg is not None and (not hierarchy or not (threshold_deg >= 0) or not math.isfinite(threshold_deg)):
+        raise LodprtError(
+            f"threshold_deg {threshold_deg!r}: the light cut needs the hierarchy and a finite threshold >= 0 degrees"
+        )
     writer = StoreWriter(out, overwrite=overwrite) if out is not None else None
     try:
         load_seconds = load_kernels(device)
@@ -215,7 +258,8 @@ def bake(
             from lodprt.hierarchy import build_hierarchy
 
             t_h = time.perf_counter()
-            tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=hierarchy_progress)
+            if tree is None:
+                tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=hierarchy_progress)
             hierarchy_seconds = time.perf_counter() - t_h
             if writer is not None:
                 for name, arr in tree.to_arrays().items():
@@ -223,20 +267,29 @@ def bake(
                 writer.attrs("hierarchy", levels=tree.levels, seconds=hierarchy_seconds, roots=int(len(tree.roots)),
                              depth=tree.depth)
         samples: list[dict] = [{} for _ in lights]
+        lightcut = None
+        if threshold_deg is not None:
+            from lodprt.cut import LightCut
+
+            lightcut = LightCut(tree, baker.points, device)
 
         def run(k: int):
             t = time.perf_counter()
-            coeffs, visible = baker.sample(lights[k])
-            return k, coeffs, visible, time.perf_counter() - t
+            if lightcut is None:
+                coeffs, visible = baker.sample(lights[k])
+                kept = ids
+            else:
+                kept, coeffs, visible = baker.sample_cut(lights[k], lightcut, threshold_deg)
+            return k, kept, coeffs, visible, time.perf_counter() - t
 
         with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
             futures = [pool.submit(run, k) for k in range(len(lights))]
             for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
-                k, coeffs, visible, seconds = fut.result()
+                k, kept, coeffs, visible, seconds = fut.result()
                 counts = np.bincount(visible, minlength=4)
                 info = {
-                    "vertices_kept": int(len(ids)),
-                    "bytes": int(ids.nbytes + coeffs.nbytes),
+                    "vertices_kept": int(len(kept)),
+                    "bytes": int(kept.nbytes + coeffs.nbytes),
                     "seconds": float(seconds),
                     "shadowed": int(counts[0]),
                     "lit": int(counts[1]),
@@ -245,7 +298,7 @@ def bake(
                 samples[k] = info
                 if writer is not None:
                     g = sample_group(k)
-                    writer.array(f"{g}/vertex_ids", ids, chunk_rows=1 << 18)
+                    writer.array(f"{g}/vertex_ids", kept, chunk_rows=1 << 18)
                     writer.array(f"{g}/coefficients", coeffs, chunk_rows=1 << 16)
                     writer.attrs(g, **info)
                 if progress is not None:
@@ -268,7 +321,8 @@ def bake(
                 format=FORMAT_NAME,
                 format_version=FORMAT_VERSION,
                 lodprt_version=_version(),
-                mode="full",
+                mode="full" if threshold_deg is None else "cut",
+                threshold_deg=threshold_deg,
                 sh_order=sh_order,
                 coefficients_per_vertex=baker.ncoef,
                 channels=baker.channels,

@@ -43,10 +43,12 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("-o", "--out", required=True, metavar="OUT.zarr", help="store to write (never replaced without --overwrite)")
     b.add_argument("--sh-order", type=int, default=4, metavar="N", help="SH bands (N*N coefficients), default 4")
     b.add_argument("--device", default=None, metavar="DEV", help="Warp device: cpu, cuda, cuda:N (default: cuda if present, else cpu)")
-    b.add_argument("--full", action="store_true", help="keep every vertex (the only mode until the hierarchy lands)")
+    b.add_argument("--threshold-deg", type=float, default=5.0, metavar="E",
+                   help="light cut: collapse lit siblings whose incident angles differ by less than E degrees (default 5)")
+    b.add_argument("--full", action="store_true", help="keep every vertex (no light cut)")
     b.add_argument("--jobs", type=int, default=None, metavar="J", help="CPU threads, one light sample each (default: all cores)")
     b.add_argument("--overwrite", action="store_true", help="replace OUT if it is an existing lodprt store")
-    b.add_argument("--no-hierarchy", action="store_true", help="skip building the vertex hierarchy (faster; no LOD later)")
+    b.add_argument("--no-hierarchy", action="store_true", help="skip the vertex hierarchy (implies --full: no light cut, no LOD later)")
 
     i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds.")
     i.add_argument("store", metavar="OUT.zarr")
@@ -103,6 +105,7 @@ def _cmd_bake(args) -> int:
             overwrite=args.overwrite,
             jobs=args.jobs,
             hierarchy=not args.no_hierarchy,
+            threshold_deg=None if args.full or args.no_hierarchy else args.threshold_deg,
             progress=bar_for("bake", "sample"),
             hierarchy_progress=bar_for("hierarchy", "collapse"),
         )
@@ -110,6 +113,8 @@ def _cmd_bake(args) -> int:
         for b in bars.values():
             b.close()
     kb = np.mean([s["bytes"] for s in res.samples]) / 1024
+    kept = np.mean([s["vertices_kept"] for s in res.samples])
+    print(f"kept {kept:,.0f} of {int(scene.referenced.sum()):,} vertices per sample on average", file=sys.stderr)
     print(
         f"wrote {res.path}: {res.coefficients_per_vertex} coefficient(s) x {res.channels} channel(s) per vertex, "
         f"{kb:,.0f} KiB per sample, bake {res.bake_seconds:.2f} s on {res.device} (+{res.load_seconds:.2f} s kernel load"

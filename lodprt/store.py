@@ -162,29 +162,51 @@ class Store:
         g = self.root[sample_group(self._check_sample(k))]
         return dict(g.attrs)
 
-    def radiance(self, sample: int, eye) -> np.ndarray:
-        """Radiance toward ``eye`` of every vertex, (V, 3) float32, from the SH coefficients of ``sample`` (T-7).
+    def completion_plan(self):
+        """The geometry-only completion weights of this store's hierarchy (computed once, then cached)."""
+        from lodprt.completion import CompletionPlan
 
-        The light's RGB intensity scales the stored unit-intensity coefficients; vertices the sample does not hold
-        (never baked: unreferenced) read 0.
+        if "completion" not in self._cache:
+            self._cache["completion"] = CompletionPlan(self.hierarchy(), self.positions, self.normals)
+        return self._cache["completion"]
+
+    def coefficients(self, sample: int) -> np.ndarray:
+        """(V, C, ncoef) float64 coefficients of every vertex for ``sample``: stored where the light cut kept the
+        vertex, completed from its pre-collapse neighbours elsewhere (T-15, ``lodprt.completion``); 0 for vertices
+        no face uses."""
+        ids, coeffs = self.sample(sample)
+        faces = self.faces
+        referenced = np.zeros(self.num_vertices, bool)
+        referenced[faces.ravel()] = True
+        kept = np.zeros(self.num_vertices, bool)
+        kept[ids] = True
+        if (referenced & ~kept).any():
+            out = self.completion_plan().complete(ids, coeffs.astype(np.float64), self.num_vertices)
+        else:
+            out = np.zeros((self.num_vertices,) + coeffs.shape[1:], np.float64)
+            out[ids] = coeffs
+        return out
+
+    def radiance(self, sample: int, eye) -> np.ndarray:
+        """Radiance toward ``eye`` of every vertex, (V, 3) float32, from the SH coefficients of ``sample`` (T-7),
+        completed where the light cut did not keep a vertex.
+
+        The light's RGB intensity scales the stored unit-intensity coefficients; vertices no face uses read 0.
         """
         from lodprt import sh
 
         eye = np.asarray(eye, dtype=np.float64)
         if eye.shape != (3,) or not np.isfinite(eye).all():
             raise StoreError(f"eye: expected 3 finite numbers, got {eye.tolist()}")
-        ids, coeffs = self.sample(sample)
-        out = np.zeros((self.num_vertices, 3), np.float64)
-        if len(ids):
-            d = eye[None, :] - self.positions[ids].astype(np.float64)
-            n = np.linalg.norm(d, axis=1, keepdims=True)
-            d = np.where(n > 0, d / np.where(n > 0, n, 1.0), self.normals[ids])  # an eye on the vertex looks along n
-            ncoef = coeffs.shape[2]
-            order = int(round(np.sqrt(ncoef)))
-            y = sh.basis(d, order)  # (K, ncoef)
-            rad = np.einsum("kci,ki->kc", coeffs.astype(np.float64), y)  # T-7
-            out[ids] = rad if rad.shape[1] == 3 else np.repeat(rad, 3, axis=1)
-        return (out * self.intensity[None, :]).astype(np.float32)
+        coeffs = self.coefficients(sample)
+        d = eye[None, :] - self.positions.astype(np.float64)
+        n = np.linalg.norm(d, axis=1, keepdims=True)
+        d = np.where(n > 0, d / np.where(n > 0, n, 1.0), self.normals)  # an eye on the vertex looks along n
+        order = int(round(np.sqrt(coeffs.shape[2])))
+        rad = np.einsum("vci,vi->vc", coeffs, sh.basis(d, order))  # T-7
+        if rad.shape[1] == 1:
+            rad = np.repeat(rad, 3, axis=1)
+        return (rad * self.intensity[None, :]).astype(np.float32)
 
     @property
     def has_hierarchy(self) -> bool:
@@ -226,6 +248,7 @@ class Store:
             "device",
             "source",
             "mode",
+            "threshold_deg",
             "lodprt_version",
             "format_version",
         )

@@ -23,3 +23,20 @@ def bunny_path():
     if not p.is_file():
         pytest.skip("../shared/models/stanford-bunny.obj is not present")
     return p
+
+
+@pytest.fixture(scope="session")
+def bunny_floor(bunny_path):
+    """The shared bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices)."""
+    from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+
+    pos, faces = load_mesh(bunny_path)
+    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
+
+
+@pytest.fixture(scope="session")
+def bunny_hierarchy(bunny_floor):
+    """The vertex hierarchy of ``bunny_floor`` (built once per test session)."""
+    from lodprt.hierarchy import build_hierarchy
+
+    return build_hierarchy(bunny_floor.positions, bunny_floor.faces, bunny_floor.normals)

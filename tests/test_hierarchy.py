@@ -9,14 +9,13 @@ from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh, vertex_normals
 
 
 @pytest.fixture(scope="module")
-def scene(bunny_path):
-    pos, faces = load_mesh(bunny_path)
-    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
+def scene(bunny_floor):
+    return bunny_floor
 
 
 @pytest.fixture(scope="module")
-def hier(scene):
-    return build_hierarchy(scene.positions, scene.faces, scene.normals)
+def hier(bunny_hierarchy):
+    return bunny_hierarchy
 
 
 def build(pos, faces):
