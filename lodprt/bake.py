@@ -174,17 +174,21 @@ class _Baker:
     def sample_cut(self, light: np.ndarray, lightcut, threshold_deg: float):
         """Bake one light sample on its light cut (thesis figure 8).
 
-        Returns (vertex ids (K,) int32 of the cut, coefficients (K, C, ncoef), visibility of all baked-for-visibility
-        vertices (len(self.ids),) uint8).
+        Returns (vertex ids (K,) int32 of the cut, ascending; the cut node standing at each (K,) int32; whether that
+        node is dark (K,) uint8; coefficients (K, C, ncoef); visibility of the referenced vertices).
         """
         wp = self.wp
         vis = self.visibility(light).numpy().copy()
         V = self.points.shape[0]
         full = np.full(V, 2, np.uint8)  # vertices no face uses: dark, never kept
         full[self.ids_host] = vis
-        active = lightcut.cut(self.normals, wp.array(full, dtype=wp.uint8, device=self.device), light, threshold_deg)
-        ids = np.unique(lightcut.h.vertex[active])
-        ids = ids[np.isin(ids, self.ids_host)].astype(np.int32)
+        active, dark = lightcut.cut(self.normals, wp.array(full, dtype=wp.uint8, device=self.device), light, threshold_deg)
+        nodes = np.flatnonzero(active)
+        verts = lightcut.h.vertex[nodes]
+        keep = np.isin(verts, self.ids_host)  # isolated unreferenced vertices are roots but never baked
+        order = np.argsort(verts[keep])
+        nodes = nodes[keep][order].astype(np.int32)
+        ids = verts[keep][order].astype(np.int32)
         k = len(ids)
         basis = wp.zeros((k, self.sh_order * self.sh_order), dtype=wp.float32, device=self.device)
         coeffs = wp.zeros((k, self.channels, self.ncoef), dtype=wp.float32, device=self.device)
@@ -195,7 +199,7 @@ class _Baker:
             basis,
             coeffs,
         )
-        return ids, coeffs.numpy().copy(), vis
+        return ids, nodes, dark[nodes].astype(np.uint8), coeffs.numpy().copy(), vis
 
 
 def load_kernels(device: str) -> float:
@@ -275,21 +279,23 @@ def bake(
 
         def run(k: int):
             t = time.perf_counter()
+            extra = {}
             if lightcut is None:
                 coeffs, visible = baker.sample(lights[k])
                 kept = ids
             else:
-                kept, coeffs, visible = baker.sample_cut(lights[k], lightcut, threshold_deg)
-            return k, kept, coeffs, visible, time.perf_counter() - t
+                kept, nodes, dark, coeffs, visible = baker.sample_cut(lights[k], lightcut, threshold_deg)
+                extra = {"cut_nodes": nodes, "dark": dark}
+            return k, kept, extra, coeffs, visible, time.perf_counter() - t
 
         with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
             futures = [pool.submit(run, k) for k in range(len(lights))]
             for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
-                k, kept, coeffs, visible, seconds = fut.result()
+                k, kept, extra, coeffs, visible, seconds = fut.result()
                 counts = np.bincount(visible, minlength=4)
                 info = {
                     "vertices_kept": int(len(kept)),
-                    "bytes": int(kept.nbytes + coeffs.nbytes),
+                    "bytes": int(kept.nbytes + coeffs.nbytes + sum(a.nbytes for a in extra.values())),
                     "seconds": float(seconds),
                     "shadowed": int(counts[0]),
                     "lit": int(counts[1]),
@@ -300,6 +306,8 @@ def bake(
                     g = sample_group(k)
                     writer.array(f"{g}/vertex_ids", kept, chunk_rows=1 << 18)
                     writer.array(f"{g}/coefficients", coeffs, chunk_rows=1 << 16)
+                    for name, arr in extra.items():
+                        writer.array(f"{g}/{name}", arr, chunk_rows=1 << 18)
                     writer.attrs(g, **info)
                 if progress is not None:
                     progress(done, len(lights))

@@ -1,4 +1,4 @@
-"""The ``lodprt`` command line: bake, info, radiance.
+"""The ``lodprt`` command line: bake, info, radiance, diff.
 
 Errors lodprt raises on purpose (bad scene, bad store, unavailable device) are printed as one line naming the file
 and field, with exit code 2; anything else is a bug and keeps its traceback.
@@ -58,14 +58,51 @@ def _parser() -> argparse.ArgumentParser:
         "radiance",
         help="radiance toward an eye for every vertex, from one light sample",
         description="Reconstruct from the stored SH coefficients of light sample K the radiance toward the eye "
-        "of every scene vertex (store order) and save it as a (V, 3) float32 .npy (linear RGB).",
+        "of every scene vertex (store order) and save it as a (V, 3) float32 .npy (linear RGB). Vertices the "
+        "light cut did not keep are completed from their pre-collapse neighbours (T-15).",
     )
     r.add_argument("store", metavar="OUT.zarr")
     r.add_argument("--sample", type=int, required=True, metavar="K", help="light sample index (see lodprt info)")
     r.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
     r.add_argument("-o", "--out", required=True, metavar="rad.npy", help="output .npy (not replaced without --overwrite)")
     r.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    d = sub.add_parser(
+        "diff",
+        help="picture of the light cut's error against the full-resolution radiance (figures 14-17)",
+        description="Render offscreen (EGL) the completed radiance of light sample K from a cut bake, the "
+        "full-resolution radiance of the same sample (re-baked from the stored scene), and their difference in "
+        "false colour with its scale, side by side, into a PNG.",
+    )
+    d.add_argument("store", metavar="OUT.zarr")
+    d.add_argument("--sample", type=int, required=True, metavar="K", help="light sample index")
+    d.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
+    d.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"), help="look-at point (default: scene centre)")
+    d.add_argument("--fov", type=float, default=40.0, metavar="DEG", help="vertical field of view (default 40)")
+    d.add_argument("--size", type=int, nargs=2, default=(640, 480), metavar=("W", "H"), help="each panel's size in pixels")
+    d.add_argument("--scale", type=float, default=None, metavar="S", help="error that maps to the top of the colour scale (default: the largest)")
+    d.add_argument("--device", default=None, metavar="DEV", help="Warp device for the full-resolution re-bake")
+    d.add_argument("-o", "--out", required=True, metavar="diff.png")
+    d.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     return p
+
+
+def _cmd_diff(args) -> int:
+    from lodprt.devices import resolve_device
+    from lodprt.diff import diff_figure
+    from lodprt.store import open_store
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        raise LodprtError(f"{out}: the output must be a .png file")
+    if out.exists() and not args.overwrite:
+        raise LodprtError(f"{out}: already exists; pass --overwrite to replace it")
+    store = open_store(args.store)
+    store._check_sample(args.sample)
+    numbers = diff_figure(store, args.sample, args.eye, out, target=args.target, size=tuple(args.size), fov=args.fov,
+                          device=resolve_device(args.device), scale=args.scale)
+    print(f"wrote {out}: relative RMSE {numbers['relative_rmse']:.4f}, max {numbers['relative_max']:.4f}, "
+          f"{numbers['vertices_kept']:,} vertices kept")
+    return 0
 
 
 def _cmd_bake(args) -> int:
@@ -164,7 +201,7 @@ def _cmd_radiance(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
-    commands = {"bake": _cmd_bake, "info": _cmd_info, "radiance": _cmd_radiance}
+    commands = {"bake": _cmd_bake, "info": _cmd_info, "radiance": _cmd_radiance, "diff": _cmd_diff}
     try:
         return commands[args.command](args)
     except LodprtError as exc:

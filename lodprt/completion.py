@@ -107,6 +107,7 @@ class CompletionPlan:
     """Geometry-only part of completion for one hierarchy: who completes whom, with which weights, in which wave."""
 
     def __init__(self, h: Hierarchy, positions: np.ndarray, normals: np.ndarray):
+        self.h = h
         V = h.num_vertices
         internal = np.arange(V, h.num_nodes)
         self.vertex = h.vertex[h.children[internal, 1]].astype(np.int64)  # the vertex each collapse removed
@@ -142,18 +143,39 @@ class CompletionPlan:
         counts = np.bincount(self.rule, minlength=3) / max(len(self.rule), 1)
         return {name: float(c) for name, c in zip(RULE_NAMES, counts)}
 
-    def complete(self, ids: np.ndarray, coeffs: np.ndarray, num_vertices: int) -> np.ndarray:
-        """(V, ...) float64 coefficients of every vertex from the kept ``ids`` (K,) and their ``coeffs`` (K, ...)."""
+    def complete(self, ids: np.ndarray, coeffs: np.ndarray, num_vertices: int, *, cut_nodes=None, dark=None) -> np.ndarray:
+        """(V, ...) float64 coefficients of every vertex from the kept ``ids`` (K,) and their ``coeffs`` (K, ...).
+
+        With the sample's cut (``cut_nodes`` (K,) and their ``dark`` flags), every vertex under a dark node is
+        exactly 0 (all its leaves face away or lie in shadow: no radiance), and the others are completed from
+        ring neighbours that are not dark (weights renormalised; all of them when every neighbour is dark).
+        """
         out = np.zeros((num_vertices,) + coeffs.shape[1:], np.float64)
         out[ids] = coeffs
         have = np.zeros(num_vertices, bool)
         have[ids] = True
+        dark_v = np.zeros(num_vertices, bool)
+        if cut_nodes is not None:
+            from lodprt.hierarchy import active_ancestors
+
+            active = np.zeros(self.h.num_nodes, bool)
+            active[cut_nodes] = True
+            leaves = self.h.parent[:num_vertices] < 0
+            active[:num_vertices] |= leaves  # isolated vertices: roots that are never baked
+            is_dark = np.zeros(self.h.num_nodes, bool)
+            is_dark[np.asarray(cut_nodes)[np.asarray(dark, bool)]] = True
+            dark_v = is_dark[active_ancestors(self.h, active)]
+            out[dark_v & ~have] = 0.0
+            have |= dark_v
         for w in range(1, len(self.wave_ptr) - 1):
             rows = self.by_wave[self.wave_ptr[w] : self.wave_ptr[w + 1]]
             rows = rows[~have[self.vertex[rows]]]
             if not len(rows):
                 continue
             nb = self.neighbours[rows]
-            out[self.vertex[rows]] = np.einsum("mr,mr...->m...", self.weights[rows], out[nb])  # T-15
+            weights = self.weights[rows] * ~dark_v[nb]
+            total = weights.sum(1, keepdims=True)
+            weights = np.where(total > 0, weights / np.where(total > 0, total, 1.0), self.weights[rows])
+            out[self.vertex[rows]] = np.einsum("mr,mr...->m...", weights, out[nb])  # T-15
             have[self.vertex[rows]] = True
         return out

@@ -49,8 +49,9 @@ class LightCut:
         self.half = wp.array(h.cone_half_angle.astype(np.float32), dtype=wp.float32, device=device)
         self.points = points
 
-    def cut(self, normals, visible, light: np.ndarray, threshold_deg: float) -> np.ndarray:
-        """Active nodes (N,) bool of the light cut for ``light``; ``visible`` (V,) device uint8 states."""
+    def cut(self, normals, visible, light: np.ndarray, threshold_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """The light cut for ``light``: (active (N,) bool, dark (N,) bool: every leaf below back-facing or in
+        shadow, so its radiance is 0); ``visible`` (V,) device uint8 states."""
         from lodprt.kernels import cut as kcut
 
         wp, dev, N, V = self.wp, self.device, self.h.num_nodes, self.h.num_vertices
@@ -78,4 +79,4 @@ class LightCut:
                 outputs=[state["active"], state["dark"], state["lit"], state["amin"], state["amax"]],
                 device=dev,
             )
-        return state["active"].numpy().astype(bool)
+        return state["active"].numpy().astype(bool), state["dark"].numpy().astype(bool)

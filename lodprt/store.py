@@ -170,6 +170,10 @@ class Store:
             self._cache["completion"] = CompletionPlan(self.hierarchy(), self.positions, self.normals)
         return self._cache["completion"]
 
+    def set_completion_plan(self, plan) -> None:
+        """Reuse a ``CompletionPlan`` built for the same hierarchy and geometry (e.g. across several stores)."""
+        self._cache["completion"] = plan
+
     def coefficients(self, sample: int) -> np.ndarray:
         """(V, C, ncoef) float64 coefficients of every vertex for ``sample``: stored where the light cut kept the
         vertex, completed from its pre-collapse neighbours elsewhere (T-15, ``lodprt.completion``); 0 for vertices
@@ -181,7 +185,11 @@ class Store:
         kept = np.zeros(self.num_vertices, bool)
         kept[ids] = True
         if (referenced & ~kept).any():
-            out = self.completion_plan().complete(ids, coeffs.astype(np.float64), self.num_vertices)
+            g = sample_group(sample)
+            cut = {}
+            if f"{g}/cut_nodes" in self.root:
+                cut = {"cut_nodes": self.read(f"{g}/cut_nodes"), "dark": self.read(f"{g}/dark")}
+            out = self.completion_plan().complete(ids, coeffs.astype(np.float64), self.num_vertices, **cut)
         else:
             out = np.zeros((self.num_vertices,) + coeffs.shape[1:], np.float64)
             out[ids] = coeffs
@@ -193,20 +201,28 @@ class Store:
 
         The light's RGB intensity scales the stored unit-intensity coefficients; vertices no face uses read 0.
         """
-        from lodprt import sh
+        return radiance_toward(self.positions, self.normals, self.coefficients(sample), eye, self.intensity)
 
-        eye = np.asarray(eye, dtype=np.float64)
-        if eye.shape != (3,) or not np.isfinite(eye).all():
-            raise StoreError(f"eye: expected 3 finite numbers, got {eye.tolist()}")
-        coeffs = self.coefficients(sample)
-        d = eye[None, :] - self.positions.astype(np.float64)
-        n = np.linalg.norm(d, axis=1, keepdims=True)
-        d = np.where(n > 0, d / np.where(n > 0, n, 1.0), self.normals)  # an eye on the vertex looks along n
-        order = int(round(np.sqrt(coeffs.shape[2])))
-        rad = np.einsum("vci,vi->vc", coeffs, sh.basis(d, order))  # T-7
-        if rad.shape[1] == 1:
-            rad = np.repeat(rad, 3, axis=1)
-        return (rad * self.intensity[None, :]).astype(np.float32)
+    def scene(self):
+        """The baked scene rebuilt from the store (positions, normals and faces exactly as baked)."""
+        from lodprt.scene import Lights, Material, Scene
+
+        kd, ks, n = self.read("materials/kd"), self.read("materials/ks"), self.read("materials/shininess")
+        a = dict(self.root["lights"].attrs)
+        referenced = np.zeros(self.num_vertices, bool)
+        referenced[self.faces.ravel()] = True
+        return Scene(
+            positions=self.positions.astype(np.float64),
+            faces=self.faces,
+            normals=self.normals.astype(np.float64),
+            material_id=self.read("scene/material_id"),
+            object_id=self.read("scene/object_id"),
+            referenced=referenced,
+            materials=[Material(tuple(float(x) for x in kd[m]), float(ks[m]), float(n[m])) for m in range(len(ks))],
+            object_names=list(self.root["scene"].attrs.get("object_names", [])),
+            lights=Lights(tuple(a["grid"]), tuple(a["box"]), tuple(a["intensity"]), a["falloff"], float(a["radius"])),
+            source=str(self.attrs.get("source", self.path)),
+        )
 
     @property
     def has_hierarchy(self) -> bool:
@@ -268,6 +284,26 @@ class Store:
         out["bytes_total"] = int(sum(s["bytes"] for s in samples))
         out["bytes_on_disk"] = int(sum(f.stat().st_size for f in self.path.rglob("*") if f.is_file()))
         return out
+
+
+def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:
+    """T-7 per vertex: sum_i c_i y_i((eye - p)/|eye - p|) times the RGB intensity; (V, 3) float32.
+
+    coeffs (V, C, ncoef) with C = 1 (grey, used for R, G and B) or 3.
+    """
+    from lodprt import sh
+
+    eye = np.asarray(eye, dtype=np.float64)
+    if eye.shape != (3,) or not np.isfinite(eye).all():
+        raise StoreError(f"eye: expected 3 finite numbers, got {eye.tolist()}")
+    d = eye[None, :] - np.asarray(positions, np.float64)
+    n = np.linalg.norm(d, axis=1, keepdims=True)
+    d = np.where(n > 0, d / np.where(n > 0, n, 1.0), normals)  # an eye on the vertex looks along n
+    order = int(round(np.sqrt(coeffs.shape[2])))
+    rad = np.einsum("vci,vi->vc", np.asarray(coeffs, np.float64), sh.basis(d, order))
+    if rad.shape[1] == 1:
+        rad = np.repeat(rad, 3, axis=1)
+    return (rad * np.asarray(intensity, np.float64)[None, :]).astype(np.float32)
 
 
 def open_store(path: str | os.PathLike) -> Store:
