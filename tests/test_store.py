@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -153,3 +154,28 @@ def test_cli_errors_are_one_line(tmp_path):
     assert r.returncode == 2 and "tpu" in r.stderr
     r = lodprt("info", tmp_path)
     assert r.returncode == 2 and "not a lodprt store" in r.stderr
+
+
+def test_cli_cut_bake_and_diff_picture(tmp_path):
+    """Default bake (light cut) on spot + floor, then lodprt diff writes a 3-panel PNG with its error numbers."""
+    spot = Path(__file__).resolve().parents[1].parent / "shared" / "models" / "spot.obj"
+    if not spot.is_file():
+        pytest.skip("../shared/models/spot.obj is not present")
+    scene = tmp_path / "spot.toml"
+    scene.write_text(f'[[object]]\nmesh = "{spot.as_posix()}"\n[floor]\nresolution = 30\n[lights]\ngrid = [2, 1, 1]\n')
+    out = tmp_path / "s.zarr"
+    r = lodprt("bake", scene, "-o", out, "--sh-order", "3", "--device", "cpu", "--threshold-deg", "10")
+    assert r.returncode == 0, r.stderr
+    info = json.loads(lodprt("info", out, "--json").stdout)
+    assert info["mode"] == "cut" and info["hierarchy_nodes"] > info["vertices"]
+    assert all(s["vertices_kept"] < info["vertices"] for s in info["samples"])
+    png = tmp_path / "d.png"
+    r = lodprt("diff", out, "--sample", "0", "--eye", "0", "1.5", "3", "--size", "160", "120", "-o", png)
+    assert r.returncode == 0, r.stderr
+    from PIL import Image
+
+    img = np.asarray(Image.open(png))
+    assert img.shape[1] > 3 * 160 and img.std() > 5  # three panels, not blank
+    assert "relative RMSE" in r.stdout
+    r = lodprt("diff", out, "--sample", "0", "--eye", "0", "1.5", "3", "-o", png)
+    assert r.returncode == 2 and "already exists" in r.stderr
