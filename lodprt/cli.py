@@ -23,6 +23,15 @@ examples:
 SCENE is 'demo' (the embedded default), a TOML scene file (docs/SCENE.md) or a mesh path."""
 
 
+def _sample_output_args(p: argparse.ArgumentParser, output: str) -> None:
+    """The arguments every per-sample command shares: store, sample, eye, output, overwrite."""
+    p.add_argument("store", metavar="OUT.zarr")
+    p.add_argument("--sample", type=int, required=True, metavar="K", help="light sample index (see lodprt info)")
+    p.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
+    p.add_argument("-o", "--out", required=True, metavar=output, help=f"output {Path(output).suffix} (not replaced without --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="lodprt",
@@ -61,11 +70,7 @@ def _parser() -> argparse.ArgumentParser:
         "of every scene vertex (store order) and save it as a (V, 3) float32 .npy (linear RGB). Vertices the "
         "light cut did not keep are completed from their pre-collapse neighbours (T-15).",
     )
-    r.add_argument("store", metavar="OUT.zarr")
-    r.add_argument("--sample", type=int, required=True, metavar="K", help="light sample index (see lodprt info)")
-    r.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
-    r.add_argument("-o", "--out", required=True, metavar="rad.npy", help="output .npy (not replaced without --overwrite)")
-    r.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    _sample_output_args(r, "rad.npy")
     d = sub.add_parser(
         "diff",
         help="picture of the light cut's error against the full-resolution radiance (figures 14-17)",
@@ -73,16 +78,12 @@ def _parser() -> argparse.ArgumentParser:
         "full-resolution radiance of the same sample (re-baked from the stored scene), and their difference in "
         "false colour with its scale, side by side, into a PNG.",
     )
-    d.add_argument("store", metavar="OUT.zarr")
-    d.add_argument("--sample", type=int, required=True, metavar="K", help="light sample index")
-    d.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
+    _sample_output_args(d, "diff.png")
     d.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"), help="look-at point (default: scene centre)")
     d.add_argument("--fov", type=float, default=40.0, metavar="DEG", help="vertical field of view (default 40)")
     d.add_argument("--size", type=int, nargs=2, default=(640, 480), metavar=("W", "H"), help="each panel's size in pixels")
     d.add_argument("--scale", type=float, default=None, metavar="S", help="error that maps to the top of the colour scale (default: the largest)")
     d.add_argument("--device", default=None, metavar="DEV", help="Warp device for the full-resolution re-bake")
-    d.add_argument("-o", "--out", required=True, metavar="diff.png")
-    d.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     return p
 
 

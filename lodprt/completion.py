@@ -29,6 +29,8 @@ import numpy as np
 from lodprt.hierarchy import Hierarchy
 
 RULE_T15, RULE_MEAN_VALUE, RULE_SHEPARD = 0, 1, 2
+#: rows of rings weighed at once (memory is CHUNK x the chunk's largest ring)
+CHUNK = 8192
 RULE_NAMES = ("T-15 cotangent", "mean value", "Shepard")
 
 
@@ -115,19 +117,32 @@ class CompletionPlan:
         counts = (offs[internal + 1] - offs[internal]).astype(np.int64)
         R = int(counts.max()) if len(counts) else 1
         M = len(internal)
-        idx = np.zeros((M, R), np.int64)
-        mask = np.arange(R)[None, :] < counts[:, None]
-        idx[mask] = h.neighbours[offs[V] : offs[h.num_nodes]] if M else []
-        idx = np.where(mask, idx, self.vertex[:, None])
         p = np.asarray(positions, np.float64)
-        w, order, rule = ring_weights(p[self.vertex], p[idx], mask, np.asarray(normals, np.float64)[self.vertex])
-        self.neighbours = np.take_along_axis(idx, order, axis=1)
-        self.weights = w
-        self.rule = rule
+        nrm = np.asarray(normals, np.float64)
+        self.neighbours = np.repeat(self.vertex[:, None], R, axis=1)
+        self.weights = np.zeros((M, R))
+        self.rule = np.zeros(M, np.int8)
+        mask_sorted = np.zeros((M, R), bool)
+        # rings padded to the largest ring of their chunk (rows sorted by ring size): bounded memory
+        by_size = np.argsort(counts, kind="stable")
+        for start in range(0, M, CHUNK):
+            rows = by_size[start : start + CHUNK]
+            r = int(counts[rows].max())
+            mask = np.arange(r)[None, :] < counts[rows, None]
+            idx = np.repeat(self.vertex[rows, None], r, axis=1)
+            first = offs[internal[rows]]
+            take = first[:, None] + np.arange(r)[None, :]
+            idx[mask] = h.neighbours[take[mask]]
+            w, order, rule = ring_weights(p[self.vertex[rows]], p[idx], mask, nrm[self.vertex[rows]])
+            self.neighbours[rows, :r] = np.take_along_axis(idx, order, axis=1)
+            self.weights[rows, :r] = w
+            self.rule[rows] = rule
+            mask_sorted[rows, :r] = np.take_along_axis(mask, order, axis=1)
+        self.neighbours = self.neighbours[:, : max(R, 1)]
         # waves: neighbours of a collapsed vertex were removed later (or never); coarse first
         wave = np.zeros(V, np.int64)
         nb = self.neighbours.tolist()
-        rows_mask = np.take_along_axis(mask, order, axis=1).tolist()
+        rows_mask = mask_sorted.tolist()
         vlist = self.vertex.tolist()
         for m in range(M - 1, -1, -1):
             best = 0
