@@ -62,9 +62,17 @@ def write(name: str, results: dict, json_path: str | None) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = Path(json_path) if json_path else RESULTS / f"{name}.json"
     path.write_text(json.dumps(results, indent=2))
-    return path
+    return _shown(path)
 
 
 def plot_path(name: str) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
-    return RESULTS / f"{name}.png"
+    return _shown(RESULTS / f"{name}.png")
+
+
+def _shown(path: Path) -> Path:
+    """The path relative to the working directory when it lies below it (what the scripts print)."""
+    try:
+        return path.resolve().relative_to(Path.cwd())
+    except ValueError:
+        return path
