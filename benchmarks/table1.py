@@ -152,21 +152,28 @@ def main():
                "environment": environment(device), "rows": rows}
     print("wrote", write(name, results, args.json))
 
+    plot(rows, name)
+
+
+def plot(rows, name):
+    """Error against bake time (markers: the times are close and noisy) and against bytes (log scale)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for ax, key, label in ((axes[0], "bake_s", "bake time (s, 9 samples)"), (axes[1], "kib", "KiB per sample")):
+    for ax, key, label in ((axes[0], "bake_s", "bake time (s, all samples)"), (axes[1], "kib", "KiB per sample")):
         x = [r[key] for r in rows]
-        ax.plot(x, [r["rmse_all"] for r in rows], "o-", label="vs full bake, all vertices")
-        ax.plot(x, [r["exact_rmse"] for r in rows], "s--", label="vs exact Phong, facing eye")
+        style = ("o", "s") if key == "bake_s" else ("o-", "s--")
+        ax.plot(x, [r["rmse_all"] for r in rows], style[0], label="vs full bake, all vertices")
+        ax.plot(x, [r["exact_rmse"] for r in rows], style[1], label="vs exact Phong, facing eye, no shadow edges")
         for r in rows:
             ax.annotate(str(r["threshold"]), (r[key], r["rmse_all"]), fontsize=8, xytext=(3, 3), textcoords="offset points")
         ax.set_xlabel(label)
         ax.set_ylabel("relative RMSE of radiance")
         ax.grid(alpha=0.3)
+    axes[1].set_xscale("log")
     axes[0].legend(fontsize=8)
     fig.suptitle("Light-dependent cut: error against bake time and bytes (labels: threshold, degrees)")
     fig.tight_layout()
