@@ -177,7 +177,13 @@ class Store:
     def coefficients(self, sample: int) -> np.ndarray:
         """(V, C, ncoef) float64 coefficients of every vertex for ``sample``: stored where the light cut kept the
         vertex, completed from its pre-collapse neighbours elsewhere (T-15, ``lodprt.completion``); 0 for vertices
-        no face uses."""
+        no face uses. Completed samples are cached on this Store object."""
+        key = f"completed/{sample}"
+        if key not in self._cache:
+            self._cache[key] = self._complete(sample)
+        return self._cache[key]
+
+    def _complete(self, sample: int) -> np.ndarray:
         ids, coeffs = self.sample(sample)
         faces = self.faces
         referenced = np.zeros(self.num_vertices, bool)
