@@ -98,7 +98,7 @@ def _cmd_diff(args) -> int:
     if out.exists() and not args.overwrite:
         raise LodprtError(f"{out}: already exists; pass --overwrite to replace it")
     store = open_store(args.store)
-    store._check_sample(args.sample)
+    store.check_sample(args.sample)
     numbers = diff_figure(store, args.sample, args.eye, out, target=args.target, size=tuple(args.size), fov=args.fov,
                           device=resolve_device(args.device), scale=args.scale)
     print(f"wrote {out}: relative RMSE {numbers['relative_rmse']:.4f}, max {numbers['relative_max']:.4f}, "
@@ -168,7 +168,8 @@ def _cmd_info(args) -> int:
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
-    print(f"{args.store}: lodprt store v{info['format_version']} ({info['mode']}) from {info['source']}")
+    mode = info["mode"] + (f", threshold {info['threshold_deg']} deg" if info.get("threshold_deg") is not None else "")
+    print(f"{args.store}: lodprt store v{info['format_version']} ({mode}) from {info['source']}")
     print(f"  vertices {info['vertices']:,}, triangles {info['faces']:,}")
     print(
         f"  SH order {info['sh_order']}: {info['coefficients_per_vertex']} coefficient(s) x {info['channels']} channel(s)"

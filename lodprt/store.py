@@ -148,18 +148,18 @@ class Store:
     def intensity(self) -> np.ndarray:
         return np.asarray(self.root["lights"].attrs["intensity"], dtype=np.float64)
 
-    def _check_sample(self, k: int) -> int:
+    def check_sample(self, k: int) -> int:
         if not 0 <= k < self.num_samples:
             raise StoreError(f"{self.path}: sample {k} out of range 0..{self.num_samples - 1}")
         return k
 
     def sample(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Vertex ids (K,) int32 and coefficients (K, C, ncoef) float32 of light sample ``k``."""
-        g = sample_group(self._check_sample(k))
+        g = sample_group(self.check_sample(k))
         return self.read(f"{g}/vertex_ids"), self.read(f"{g}/coefficients")
 
     def sample_info(self, k: int) -> dict:
-        g = self.root[sample_group(self._check_sample(k))]
+        g = self.root[sample_group(self.check_sample(k))]
         return dict(g.attrs)
 
     def completion_plan(self):
