@@ -122,7 +122,6 @@ class CompletionPlan:
         self.neighbours = np.repeat(self.vertex[:, None], R, axis=1)
         self.weights = np.zeros((M, R))
         self.rule = np.zeros(M, np.int8)
-        mask_sorted = np.zeros((M, R), bool)
         # rings padded to the largest ring of their chunk (rows sorted by ring size): bounded memory
         by_size = np.argsort(counts, kind="stable")
         for start in range(0, M, CHUNK):
@@ -137,19 +136,16 @@ class CompletionPlan:
             self.neighbours[rows, :r] = np.take_along_axis(idx, order, axis=1)
             self.weights[rows, :r] = w
             self.rule[rows] = rule
-            mask_sorted[rows, :r] = np.take_along_axis(mask, order, axis=1)
         self.neighbours = self.neighbours[:, : max(R, 1)]
+        self.ring_len = counts  # real neighbours per row: sorted rows keep them first
         # waves: neighbours of a collapsed vertex were removed later (or never); coarse first
-        wave = np.zeros(V, np.int64)
+        wave = [0] * V
+        lens = counts.tolist()
         nb = self.neighbours.tolist()
-        rows_mask = mask_sorted.tolist()
         vlist = self.vertex.tolist()
         for m in range(M - 1, -1, -1):
-            best = 0
-            for q, real in zip(nb[m], rows_mask[m]):
-                if real and wave[q] > best:
-                    best = wave[q]
-            wave[vlist[m]] = best + 1
+            wave[vlist[m]] = 1 + max((wave[q] for q in nb[m][: lens[m]]), default=0)
+        wave = np.asarray(wave, np.int64)
         self.wave = wave[self.vertex]
         self.by_wave = np.argsort(self.wave, kind="stable")
         self.wave_ptr = np.searchsorted(self.wave[self.by_wave], np.arange(self.wave.max() + 2 if M else 1))
@@ -187,10 +183,11 @@ class CompletionPlan:
             rows = rows[~have[self.vertex[rows]]]
             if not len(rows):
                 continue
-            nb = self.neighbours[rows]
-            weights = self.weights[rows] * ~dark_v[nb]
+            r = max(int(self.ring_len[rows].max()), 1)  # no work on the padding of larger rings
+            nb = self.neighbours[rows, :r]
+            weights = self.weights[rows, :r] * ~dark_v[nb]
             total = weights.sum(1, keepdims=True)
-            weights = np.where(total > 0, weights / np.where(total > 0, total, 1.0), self.weights[rows])
+            weights = np.where(total > 0, weights / np.where(total > 0, total, 1.0), self.weights[rows, :r])
             out[self.vertex[rows]] = np.einsum("mr,mr...->m...", weights, out[nb])  # T-15
             have[self.vertex[rows]] = True
         return out
