@@ -82,8 +82,6 @@ def main():
     plan = CompletionPlan(tree, scene.positions, scene.normals)
     print(f"{scene.source}: {int(scene.referenced.sum()):,} referenced vertices; hierarchy {tree.num_nodes:,} nodes "
           f"in {hierarchy_s:.1f} s; completion rules {plan.rule_fractions()}", flush=True)
-    b = scene.bounds
-    centre = 0.5 * (b[0] + b[1])
     obj = scene.object_id == 0
     ext = float((scene.positions[obj].max(0) - scene.positions[obj].min(0)).max())
     eye = scene.positions[obj].mean(0) + EYE_OFFSET * ext

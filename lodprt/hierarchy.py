@@ -309,7 +309,6 @@ def build_hierarchy(
 
     # mutable mesh: faces as lists, incidence as sets
     F = [list(f) for f in work_faces.tolist()]
-    alive_face = [True] * len(F)
     incident: list[set] = [set() for _ in range(V)]
     for fi, f in enumerate(F):
         for x in f:
@@ -372,17 +371,14 @@ def build_hierarchy(
 
     def collapse(v, u, nv):
         nonlocal done
-        new_faces = []
         for fi in list(incident[v]):
             f = F[fi]
             if u in f:
-                alive_face[fi] = False
                 for x in f:
                     incident[x].discard(fi)
             else:
                 F[fi] = [u if x == v else x for x in f]
                 incident[u].add(fi)
-                new_faces.append(fi)
         incident[v].clear()
         quadric[u] += quadric[v]
         removed[v] = True

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from lodprt.errors import LodprtError
-from lodprt.hierarchy import Cut, Hierarchy, active_ancestors, build_hierarchy, pymeshlab_levels, triangulate
-from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh, vertex_normals
+from lodprt.hierarchy import Cut, Hierarchy, active_ancestors, build_hierarchy, pymeshlab_levels
+from lodprt.scene import vertex_normals
 
 
 @pytest.fixture(scope="module")

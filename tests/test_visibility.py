@@ -6,7 +6,7 @@ import pytest
 from lodprt import reference
 from lodprt.bake import _Baker, load_kernels, ray_offset
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
-from lodprt.scene import Lights, _assemble, THESIS_MATERIAL, load_mesh
+from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
 
 embreex = pytest.importorskip("embreex")
 
