@@ -214,9 +214,9 @@ def _procedural_mesh() -> tuple[np.ndarray, np.ndarray]:
     """A torus standing upright over a slab: it shadows itself and the floor."""
     import trimesh
 
+    # trimesh's torus rings around z: its ring stands upright in the x-y plane (y up), resting on the slab
     torus = trimesh.creation.torus(major_radius=0.3, minor_radius=0.1, major_sections=96, minor_sections=32)
-    torus.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
-    torus.apply_translation([0.0, 0.4, 0.0])
+    torus.apply_translation([0.0, 0.5, 0.0])
     slab = trimesh.creation.box(extents=[0.3, 0.1, 0.3])
     slab.apply_translation([0.0, 0.05, 0.0])
     v = np.concatenate([torus.vertices, slab.vertices])
