@@ -62,3 +62,218 @@ def test_tone_map_srgb():
     """Tone mapping clips at white and applies the sRGB transfer curve (0.5 linear -> 0.7354)."""
     out = tone_map(np.array([[0.0, 0.5, 2.0]]), white=1.0)
     np.testing.assert_allclose(out, [[0.0, 0.735356983, 1.0]], atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Frames: the SH renderer against CPU ray casting of the same frame
+
+from lodprt import sh  # noqa: E402
+from lodprt.render import Renderer, camera_matrices, full_frame, light_weights  # noqa: E402
+from lodprt.runtime import Camera, Frame  # noqa: E402
+
+trimesh = pytest.importorskip("trimesh")
+
+
+@pytest.fixture(scope="module")
+def bunny_store(bunny_floor, tmp_path_factory):
+    """The bunny on a 40 x 40 floor, 3 x 1 x 3 light samples, order 4 (16 coefficients), full bake (~1 s)."""
+    from lodprt.bake import bake
+    from lodprt.store import open_store
+
+    path = tmp_path_factory.mktemp("render") / "bunny.zarr"
+    bake(bunny_floor, path, sh_order=4, device="cpu", hierarchy=False)
+    return open_store(path)
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    try:
+        r = Renderer()
+    except LodprtError as exc:  # pragma: no cover - machines without EGL
+        pytest.skip(str(exc))
+    yield r
+    r.release()
+
+
+CAM = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), fov=40.0, width=256, height=256)
+
+
+def pixel_rays(cam: Camera):
+    """World-space unit rays through every pixel centre, row 0 at the top (an independent camera model)."""
+    f = np.subtract(cam.target, cam.eye)
+    f /= np.linalg.norm(f)
+    s = np.cross(f, cam.up)
+    s /= np.linalg.norm(s)
+    u = np.cross(s, f)
+    t = np.tan(np.radians(cam.fov) / 2)
+    rows, cols = np.mgrid[0 : cam.height, 0 : cam.width]
+    x = ((cols + 0.5) / cam.width * 2 - 1) * t * cam.width / cam.height
+    y = (1 - (rows + 0.5) / cam.height * 2) * t
+    d = x[..., None] * s + y[..., None] * u + f
+    return (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3)
+
+
+def ray_cast_image(frame: Frame, cam: Camera, *, per_vertex: bool):
+    """CPU reference: the first hit of each pixel's ray, radiance from the frame's coefficients (float64).
+
+    per_vertex: barycentric mix of the per-vertex radiance toward the eye (T-7 at vertices);
+    else: barycentric mix of the coefficients evaluated at the hit point's own view direction.
+    Returns (H, W, 3) linear radiance, the (H, W) covered mask, and the hit points/triangles."""
+    mesh = trimesh.Trimesh(frame.positions.astype(np.float64), frame.triangles, process=False)
+    dirs = pixel_rays(cam)
+    eye = np.asarray(cam.eye, np.float64)
+    tri, ray, loc = mesh.ray.intersects_id(np.repeat(eye[None], len(dirs), 0), dirs, multiple_hits=False,
+                                           return_locations=True)
+    corners = mesh.vertices[mesh.faces[tri]]
+    bary = trimesh.triangles.points_to_barycentric(corners, loc)
+    vids = mesh.faces[tri]
+    img = np.zeros((len(dirs), 3))
+    if per_vertex:
+        img[ray] = np.einsum("rk,rkc->rc", bary, frame.radiance[vids].astype(np.float64))
+    else:
+        coef = np.einsum("rk,rkci->rci", bary, frame.coefficients[vids].astype(np.float64))
+        view = eye[None] - loc
+        img[ray] = np.einsum("rci,ri->rc", coef, sh.basis(view, int(round(np.sqrt(coef.shape[2])))))
+    covered = np.zeros(len(dirs), bool)
+    covered[ray] = True
+    shape = (cam.height, cam.width)
+    return img.reshape(shape + (3,)), covered.reshape(shape), (ray, tri, loc)
+
+
+def psnr(ref, got) -> float:
+    return float(10 * np.log10(ref.max() ** 2 / np.mean((ref - got) ** 2)))
+
+
+@pytest.mark.parametrize("per_vertex", [False, True], ids=["per-fragment", "per-vertex"])
+def test_render_agrees_with_cpu_ray_cast(bunny_store, renderer, per_vertex):
+    """The 256x256 EGL render of the order-4 bunny bake matches CPU ray casting of the same frame: PSNR >= 35 dB
+    over the covered pixels, and the same pixels are covered."""
+    frame = full_frame(bunny_store, CAM, sample=0)
+    img = renderer.image(frame, linear=True, per_vertex=per_vertex)
+    assert img.shape == (256, 256, 3) and img.dtype == np.float32
+    ref, covered, _ = ray_cast_image(frame, CAM, per_vertex=per_vertex)
+    drawn = img.max(2) > 0
+    lit = ref.max(2) > 0
+    assert np.mean(drawn != (covered & (lit | drawn))) < 0.01  # coverage differs only along silhouettes
+    assert (img[~covered] == 0).mean() > 0.99  # background 0
+    value = psnr(ref[covered], img[covered].astype(np.float64))
+    assert value >= 35.0, f"PSNR {value:.1f} dB"
+
+
+def test_vertex_radiance_projects_onto_its_pixel(bunny_store, renderer):
+    """CPU per-vertex radiance projected through the same camera lands on pixels of that radiance (floor vertices,
+    whose triangles span several pixels; PSNR >= 35 dB) - checks the camera and image-row conventions."""
+    frame = full_frame(bunny_store, CAM, sample=0)
+    img = renderer.image(frame, linear=True, per_vertex=True)
+    view, proj = camera_matrices(CAM, frame.positions)
+    h = np.hstack([frame.positions, np.ones((len(frame.positions), 1))]) @ (proj @ view).T
+    ndc = h[:, :3] / h[:, 3:]
+    col = np.floor((ndc[:, 0] + 1) / 2 * CAM.width).astype(int)
+    row = np.floor((1 - ndc[:, 1]) / 2 * CAM.height).astype(int)
+    p = frame.positions
+    floor = p[:, 1] <= p[:, 1].min() + 1e-6
+    lo, hi = p[floor].min(0), p[floor].max(0)
+    floor &= (p[:, 0] > lo[0]) & (p[:, 0] < hi[0]) & (p[:, 2] > lo[2]) & (p[:, 2] < hi[2])  # not on the floor's rim
+    mesh = trimesh.Trimesh(frame.positions.astype(np.float64), frame.triangles, process=False)
+    eye = np.asarray(CAM.eye)
+    d = frame.positions - eye
+    dist = np.linalg.norm(d, axis=1)
+    ok = floor & (col >= 0) & (col < CAM.width) & (row >= 0) & (row < CAM.height)
+    idx = np.flatnonzero(ok)
+    loc, ray, _ = mesh.ray.intersects_location(np.repeat(eye[None], len(idx), 0), d[idx] / dist[idx, None],
+                                               multiple_hits=False)
+    seen = np.zeros(len(idx), bool)
+    seen[ray] = np.linalg.norm(loc - eye, axis=1) >= dist[idx[ray]] * (1 - 1e-4)
+    idx = idx[seen]
+    assert len(idx) > 200
+    ref = frame.radiance[idx].astype(np.float64)
+    assert psnr(ref, img[row[idx], col[idx]].astype(np.float64)) >= 35.0
+
+
+def test_shadow_is_where_ray_casting_puts_it(bunny_store, renderer):
+    """Dark floor pixels of the render (radiance under half the unshadowed diffuse term) are the floor points whose
+    ray to the light the bunny blocks (embree/trimesh): >= 95% agreement and shadow IoU >= 0.75."""
+    frame = full_frame(bunny_store, CAM, sample=0)
+    img = renderer.image(frame, linear=True)
+    _, covered, (ray, tri, loc) = ray_cast_image(frame, CAM, per_vertex=True)
+    floor_y = frame.positions[:, 1].min()
+    on_floor = np.abs(loc[:, 1] - floor_y) < 1e-6
+    ray, loc = ray[on_floor], loc[on_floor]
+    light = frame.lights[0]
+    to_light = light[None] - loc
+    dist = np.linalg.norm(to_light, axis=1)
+    mesh = trimesh.Trimesh(frame.positions.astype(np.float64), frame.triangles, process=False)
+    origins = loc + 1e-5 * to_light / dist[:, None]
+    blocked = mesh.ray.intersects_any(origins, to_light / dist[:, None])
+    kd = bunny_store.scene().materials[0].kd[0]
+    unshadowed = kd * (to_light[:, 1] / dist) / np.maximum(dist, bunny_store.scene().lights.radius) ** 2
+    got = img.reshape(-1, 3)[ray].mean(1) / (unshadowed * frame.light_colors[0].mean())
+    dark = got < 0.5
+    assert 0.03 < blocked.mean() < 0.6, "the view must show some shadow and some lit floor"
+    assert np.mean(dark == blocked) >= 0.95
+    assert (dark & blocked).sum() / (dark | blocked).sum() >= 0.75
+
+
+def test_wireframe_and_light_markers_appear(bunny_store, renderer):
+    """Wireframe edges show in the wire colour only when asked; a light marker covers the light's pixel."""
+    cam = Camera(eye=(0.0, 0.45, 0.7), target=(0.0, 0.15, 0.0), fov=45.0, width=200, height=160)
+    frame = full_frame(bunny_store, cam, lights=[(0.05, 0.35, 0.05)], colors=[(2.0, 1.0, 0.5)])
+    magenta = np.array([255, 0, 255])
+    plain = renderer.image(frame, light_markers=False)
+    wired = renderer.image(frame, wireframe=True, wire_color=(1.0, 0.0, 1.0), light_markers=False)
+    assert (plain == magenta).all(-1).sum() == 0
+    assert (wired == magenta).all(-1).sum() > 500
+    marked = renderer.image(frame)
+    view, proj = camera_matrices(cam, np.vstack([frame.positions, frame.lights]))
+    h = proj @ view @ np.append(frame.lights[0], 1.0)
+    col, row = int((h[0] / h[3] + 1) / 2 * cam.width), int((1 - h[1] / h[3]) / 2 * cam.height)
+    assert tuple(marked[row, col]) == (255, 172, 131)  # 0.35 + 0.65 * colour / max colour, 8-bit
+    assert tuple(plain[row, col]) != tuple(marked[row, col])
+
+
+def test_no_gl_errors_in_any_mode(bunny_store, renderer):
+    """Drawing linear, per-vertex, wireframe and marker passes leaves no OpenGL error."""
+    frame = full_frame(bunny_store, CAM, sample=4)
+    for kw in ({"linear": True}, {"per_vertex": True}, {"wireframe": True}, {"exposure": 1.0, "white": 5.0}):
+        assert renderer.draw(frame, **kw)["gl_error"] == "GL_NO_ERROR"
+    assert renderer.ctx.error == "GL_NO_ERROR"
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 5, 8])
+def test_shader_sh_basis_matches_numpy(renderer, order):
+    """The generated GLSL basis equals lodprt.sh.basis at every order the shader offers (a wide-angle quad whose
+    vertices share random RGB coefficients: each pixel is c . y(view direction))."""
+    rng = np.random.default_rng(order)
+    cam = Camera(eye=(0.0, 0.0, 0.3), target=(0.0, 0.0, 0.0), fov=120.0, width=64, height=64)
+    pos = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    coef = np.repeat(rng.normal(size=(1, 3, order * order)), 4, axis=0).astype(np.float32)
+    frame = Frame(vertex_ids=np.arange(4, dtype=np.int32), positions=pos, normals=np.tile([0, 0, 1], (4, 1)).astype(np.float32),
+                  triangles=np.array([[0, 1, 2], [0, 2, 3]], np.int32), coefficients=coef, radiance=np.ones((4, 3), np.float32),
+                  lights=np.zeros((0, 3)), light_colors=np.zeros((0, 3)), camera=cam, stats={})
+    img = renderer.image(frame, linear=True).reshape(-1, 3).astype(np.float64)
+    dirs = pixel_rays(cam)
+    hits = np.asarray(cam.eye) + dirs * (-0.3 / dirs[:, 2:3])
+    ref = np.einsum("ci,ri->rc", coef[0].astype(np.float64), sh.basis(np.asarray(cam.eye) - hits, order))
+    np.testing.assert_allclose(img, ref, atol=2e-3 * np.abs(ref).max())
+
+
+def test_bad_frames_are_clear_errors(renderer):
+    """A frame with 81 coefficients per channel (order 9) or triangles past its vertices is refused by name."""
+    cam = Camera(eye=(0, 0, 3), target=(0, 0, 0), width=16, height=16)
+    base = dict(vertex_ids=np.arange(3, dtype=np.int32), positions=np.eye(3, dtype=np.float32),
+                normals=np.eye(3, dtype=np.float32), radiance=np.ones((3, 3), np.float32), lights=np.zeros((0, 3)),
+                light_colors=np.zeros((0, 3)), camera=cam, stats={})
+    with pytest.raises(LodprtError, match="coefficients"):
+        renderer.image(Frame(triangles=np.array([[0, 1, 2]], np.int32), coefficients=np.ones((3, 3, 81), np.float32), **base))
+    with pytest.raises(LodprtError, match="triangles"):
+        renderer.image(Frame(triangles=np.array([[0, 1, 3]], np.int32), coefficients=np.ones((3, 3, 4), np.float32), **base))
+
+
+def test_light_weights_t12():
+    """T-12: eight nearest samples, (1 - d/r)^4 normalised; a light on a lone sample gets weight 1."""
+    grid = np.stack(np.meshgrid(*[np.arange(3.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    idx, w = light_weights(grid, (0.9, 1.2, 1.0))
+    d = np.linalg.norm(grid[idx] - [0.9, 1.2, 1.0], axis=1)
+    assert len(idx) == 8 and np.isclose(w.sum(), 1) and np.all(np.diff(d) >= 0)
+    np.testing.assert_allclose(w, (1 - d / d.max()) ** 4 / ((1 - d / d.max()) ** 4).sum())
+    assert light_weights(grid[:1], (5.0, 5.0, 5.0))[1].tolist() == [1.0]
