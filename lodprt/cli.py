@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lodprt import environment_cli
 from lodprt.errors import LodprtError
 
 EPILOG_BAKE = """\
@@ -84,6 +85,7 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--size", type=int, nargs=2, default=(640, 480), metavar=("W", "H"), help="each panel's size in pixels")
     d.add_argument("--scale", type=float, default=None, metavar="S", help="error that maps to the top of the colour scale (default: the largest)")
     d.add_argument("--device", default=None, metavar="DEV", help="Warp device for the full-resolution re-bake")
+    environment_cli.add_parsers(sub)  # irradiance, bake-environment, render-environment
     return p
 
 
@@ -203,7 +205,8 @@ def _cmd_radiance(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
-    commands = {"bake": _cmd_bake, "info": _cmd_info, "radiance": _cmd_radiance, "diff": _cmd_diff}
+    commands = {"bake": _cmd_bake, "info": _cmd_info, "radiance": _cmd_radiance, "diff": _cmd_diff,
+                **environment_cli.COMMANDS}
     try:
         return commands[args.command](args)
     except LodprtError as exc:
