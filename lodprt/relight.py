@@ -1,0 +1,109 @@
+"""Run-time relighting of a transfer bake under a (rotating) distant environment (patent P-10..P-12, SPEC 6).
+
+Per frame: rotate the environment's SH coefficients (P-4), then per vertex
+
+    diffuse  L_o = T . L                                              (one dot product per channel, P-10)
+    glossy   L_o += ks sum_k (h * (M L))_k y_k(R)                       (matrix-vector, Phong convolution P-6,
+                                                                        evaluation in the reflection direction P-12)
+
+with ``R = 2 (n.v) n - v`` the view direction ``v`` (vertex to eye) mirrored about the normal and ``h`` the
+material's lobe ``max(cos, 0)^shininess``. Everything is float64 numpy on the host: a frame of the 35k-vertex bunny
+at order 3 is a few milliseconds for the diffuse part.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lodprt import sh
+from lodprt.environment import rotate_lighting, rotation_about_y
+from lodprt.errors import LodprtError
+
+
+def rotated_lighting(coeffs, degrees: float = 0.0) -> np.ndarray:
+    """Environment coefficients (C, n^2) turned by ``degrees`` about +y (the world's up): (C, n^2) float64."""
+    c = np.asarray(coeffs, np.float64)
+    return c if degrees == 0 else rotate_lighting(c, rotation_about_y(degrees))
+
+
+def diffuse_radiance(transfer, lighting) -> np.ndarray:
+    """L_o = T . L per vertex and channel: transfer (V, 3, n^2), lighting (3, >= n^2) -> (V, 3) float64."""
+    t = np.asarray(transfer, np.float64)
+    n2 = t.shape[-1]
+    lighting = np.asarray(lighting, np.float64)
+    if lighting.shape[0] != t.shape[1] or lighting.shape[-1] < n2:
+        raise LodprtError(f"relight: lighting {lighting.shape} does not fit transfer vectors {t.shape}")
+    return np.einsum("vci,ci->vc", t, lighting[:, :n2])
+
+
+def glossy_radiance(matrices, positions, normals, ks, shininess, lighting, eye) -> np.ndarray:
+    """Glossy radiance toward ``eye`` (P-12) of G vertices: matrices (G, no^2, ni^2), positions and normals (G, 3),
+    ks and shininess (G,), lighting (3, >= ni^2) -> (G, 3) float64.
+    """
+    m = np.asarray(matrices, np.float64)
+    g, no2, ni2 = m.shape
+    order = int(round(np.sqrt(no2)))
+    lt = np.einsum("gij,cj->gci", m, np.asarray(lighting, np.float64)[:, :ni2])  # transferred incident radiance
+    scale = np.empty((g, no2))
+    shin = np.asarray(shininess, np.float64)
+    for n in np.unique(shin):  # P-6 convolution factors sqrt(4 pi/(2l+1)) z_l of each material's lobe
+        scale[shin == n] = sh._zonal_scale(sh.cosine_power_zonal(n, order))
+    v = np.asarray(eye, np.float64)[None, :] - positions
+    v /= np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+    nrm = np.asarray(normals, np.float64)
+    r = 2.0 * (nrm * v).sum(1, keepdims=True) * nrm - v
+    y = sh.basis(r, order)
+    return np.asarray(ks, np.float64)[:, None] * np.einsum("gci,gi,gi->gc", lt, scale, y)
+
+
+def open_transfer(path):
+    from lodprt.transfer import TransferStore
+
+    return TransferStore(path)
+
+
+def relit_radiance(store, lighting, eye=None) -> np.ndarray:
+    """Radiance (V, 3) float64 of every vertex of a transfer store under ``lighting`` (3, n^2), seen from ``eye``.
+
+    The glossy term is added where the store holds matrices (needs ``eye``); vertices no face uses stay 0.
+    """
+    t = store.read("transfer/diffuse")
+    rad = diffuse_radiance(t, lighting)
+    ids = store.read("transfer/glossy_vertex_ids")
+    if len(ids) and eye is not None and store.has("transfer/glossy"):
+        mid = store.read("scene/material_id")[ids]
+        ks = store.read("materials/ks")[mid]
+        shin = store.read("materials/shininess")[mid]
+        rad[ids] += glossy_radiance(store.read("transfer/glossy"), store.read("scene/positions")[ids].astype(np.float64),
+                                    store.read("scene/normals")[ids].astype(np.float64), ks, shin, lighting, eye)
+    return rad
+
+
+def render_relit(store, lighting, *, eye, target=None, up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600),
+                 white: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Render the store relit by ``lighting`` (3, n^2) from ``eye``: (image (H, W, 3) uint8, radiance (V, 3)).
+
+    Per-vertex radiance, tone-mapped with :func:`lodprt.render.tone_map` (``white`` = radiance shown as white,
+    default the 99th percentile), drawn with :func:`lodprt.render.render` (offscreen EGL).
+    """
+    from lodprt.render import render, tone_map
+
+    pos = store.read("scene/positions")
+    faces = store.read("scene/faces")
+    if target is None:
+        used = np.unique(faces)
+        target = (pos[used].min(0) + pos[used].max(0)) / 2
+    rad = relit_radiance(store, lighting, eye)
+    img = render(pos, faces, tone_map(rad, white), eye=eye, target=target, up=up, fov=fov, size=size)
+    return img, rad
+
+
+def save_png(path, image) -> Path:
+    """Write an (H, W, 3) uint8 image as PNG (matplotlib's writer, a runtime dependency already)."""
+    import matplotlib.image
+
+    path = Path(path)
+    matplotlib.image.imsave(path, image)
+    return path

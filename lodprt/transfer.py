@@ -1,0 +1,466 @@
+"""Distant-light precomputed radiance transfer per vertex (patent sections 2-3; SPEC 6) and its store.
+
+Diffuse transfer (P-10): a vertex of albedo ``kd`` under distant lighting L(s) (SH coefficients ``L_i``) leaves
+radiance ``L_o = sum_i T_i L_i`` with
+
+    unshadowed      T_i = kd/pi integral max(n.s, 0) y_i(s) ds                (closed form: the cosine lobe, P-6)
+    shadowed        T_i = kd/pi integral max(n.s, 0) V(s) y_i(s) ds            (M_p = H_N V_p, rays)
+    interreflected  T = T^0 + T^1 + ...,  T^b(p) = kd/pi integral max(n.s, 0) (1 - V(s)) T^{b-1}(hit(p, s)) ds
+
+where ``T^{b-1}(hit)`` is interpolated barycentrically from the hit triangle's vertices and only front faces pass
+light on. Bounce passes stop when a pass' energy (its mean response to a unit white sky, ``sqrt(4 pi) T_0``, over
+vertices and channels) falls below ``threshold`` times the direct pass' energy, or after ``bounces`` passes.
+
+Glossy transfer (P-11, P-12): per vertex a matrix ``M_ij = integral V(s) H(n.s) y_i(s) y_j(s) ds`` (rows: order of
+the transferred radiance, columns: order of the source lighting) maps lighting to transferred incident radiance;
+at run time it is convolved with the Phong lobe of the material and evaluated in the reflection direction
+(:mod:`lodprt.relight`).
+
+Units: the transfer includes ``kd / pi`` (a Lambertian of albedo ``kd``; an irradiance map gives ``kd E / pi``,
+:mod:`lodprt.irradiance`). The glossy term is ``ks integral L(u) max(R.u, 0)^n du`` (the thesis' Phong lobe,
+unnormalised). Lighting and transfer are in the world frame (y up).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lodprt import sh
+from lodprt.devices import resolve_device, warp
+from lodprt.errors import LodprtError, StoreError
+
+log = logging.getLogger(__name__)
+
+MODES = ("unshadowed", "shadowed", "interreflected")
+GLOSSY_MODES = {"none": 0, "hemisphere": 1, "shadowed": 2}
+TRANSFER_FORMAT = "lodprt-transfer"
+TRANSFER_FORMAT_VERSION = 1
+#: ray origin offset as a fraction of the scene diagonal (the same as the point-light bake)
+RAY_OFFSET_FRACTION = 1e-4
+
+
+def fibonacci_directions(count: int) -> np.ndarray:
+    """Spherical Fibonacci set: (count, 3) float64 unit vectors, z_k = 1 - (2k+1)/count, phi_k = 2 pi k / golden^2.
+
+    Each point stands for the same solid angle 4 pi / count (equal-area latitude bands, golden-angle longitudes).
+    """
+    count = int(count)
+    if count < 1:
+        raise LodprtError(f"rays {count}: need at least one direction")
+    k = np.arange(count, dtype=np.float64)
+    z = 1.0 - (2.0 * k + 1.0) / count
+    phi = 2.0 * np.pi * np.mod(k * (3.0 - np.sqrt(5.0)) / 2.0, 1.0)
+    s = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
+    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+
+
+def ray_offset(positions: np.ndarray) -> float:
+    """Ray-origin offset in scene units: scales with the scene's size and the float32 resolution of its coordinates."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    return max(RAY_OFFSET_FRACTION * float(np.linalg.norm(hi - lo)), 64.0 * float(np.finfo(np.float32).eps) * float(np.abs(positions).max()))
+
+
+def load_kernels(device: str) -> float:
+    """Compile or load ``lodprt.kernels.transfer`` on ``device``; returns seconds."""
+    wp = warp()
+    from lodprt.kernels import transfer as ktr
+
+    t0 = time.perf_counter()
+    wp.load_module(ktr, device=device)
+    return time.perf_counter() - t0
+
+
+@dataclasses.dataclass
+class Geometry:
+    """A triangle mesh on a Warp device, ready for transfer rays.
+
+    positions, normals (V, 3) float64; faces (F, 3) int32; albedo (V, 3) float64 kd per vertex; referenced (V,)
+    """
+
+    positions: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    albedo: np.ndarray
+    referenced: np.ndarray
+    device: str
+    offset: float
+
+    @classmethod
+    def from_arrays(cls, positions, faces, normals, albedo=(1.0, 1.0, 1.0), *, device=None, offset=None) -> "Geometry":
+        pos = np.asarray(positions, np.float64)
+        fc = np.asarray(faces, np.int64)
+        nrm = np.asarray(normals, np.float64)
+        if pos.ndim != 2 or pos.shape[1] != 3 or nrm.shape != pos.shape:
+            raise LodprtError(f"transfer: positions and normals must both be (V, 3), got {pos.shape} and {nrm.shape}")
+        if fc.ndim != 2 or fc.shape[1] != 3 or (fc.size and (fc.min() < 0 or fc.max() >= len(pos))):
+            raise LodprtError(f"transfer: faces must be (F, 3) indices into {len(pos)} vertices")
+        alb = np.broadcast_to(np.asarray(albedo, np.float64), pos.shape).copy()
+        ref = np.zeros(len(pos), bool)
+        ref[fc.ravel()] = True
+        off = ray_offset(pos) if offset is None else float(offset)
+        return cls(pos, fc.astype(np.int32), nrm, alb, ref, resolve_device(device), off)
+
+    @classmethod
+    def from_scene(cls, scene, *, device=None) -> "Geometry":
+        kd = np.array([m.kd for m in scene.materials], np.float64)[scene.material_id]
+        g = cls.from_arrays(scene.positions, scene.faces, scene.normals, kd, device=device)
+        g.referenced = scene.referenced.copy()
+        return g
+
+    def _warp(self):
+        if not hasattr(self, "_wp_cache"):
+            wp = warp()
+            load_kernels(self.device)
+            pts = wp.array(self.positions.astype(np.float32), dtype=wp.vec3, device=self.device)
+            nrm = wp.array(self.normals.astype(np.float32), dtype=wp.vec3, device=self.device)
+            idx = wp.array(self.faces.ravel().astype(np.int32), dtype=wp.int32, device=self.device)
+            mesh = wp.Mesh(points=pts, indices=idx)
+            faces2d = wp.array(self.faces.astype(np.int32), dtype=wp.int32, device=self.device)
+            self._wp_cache = (mesh, pts, nrm, faces2d)
+        return self._wp_cache
+
+    @property
+    def max_dist(self) -> float:
+        return 4.0 * float(np.linalg.norm(self.positions.max(0) - self.positions.min(0))) + 1.0
+
+
+def _dirs(rays: int, device: str):
+    wp = warp()
+    return wp.array(fibonacci_directions(rays).astype(np.float32), dtype=wp.vec3, device=device)
+
+
+def geometric_transfer(geom: Geometry, *, order: int, rays: int = 256, shadowed: bool = True, rotate: bool = False,
+                       seed: int = 0) -> np.ndarray:
+    """integral max(n.s, 0) V(s) y_i(s) ds per vertex by rays (no albedo): (V, order^2) float32.
+
+    ``shadowed=False`` drops V (the quadrature of the unshadowed transfer).
+    """
+    from lodprt.kernels import transfer as ktr
+
+    wp = warp()
+    mesh, pts, nrm, _ = geom._warp()
+    n = len(geom.positions)
+    out = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
+    scratch = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
+    wp.launch(ktr.diffuse_direct, dim=n, device=geom.device,
+              inputs=[mesh.id, pts, nrm, _dirs(rays, geom.device), int(rotate), int(seed), int(order), float(geom.offset),
+                      int(shadowed), geom.max_dist, scratch], outputs=[out])
+    return out.numpy()
+
+
+def unshadowed_transfer_closed_form(geom: Geometry, *, order: int) -> np.ndarray:
+    """integral max(n.s, 0) y_i(s) ds per vertex, evaluated in the kernel from the zonal cosine lobe: (V, order^2)."""
+    from lodprt.kernels import transfer as ktr
+
+    wp = warp()
+    _, _, nrm, _ = geom._warp()
+    n = len(geom.positions)
+    scale = sh._zonal_scale(sh.cosine_power_zonal(1.0, order)).astype(np.float32)
+    out = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
+    wp.launch(ktr.unshadowed_closed_form, dim=n, device=geom.device,
+              inputs=[nrm, int(order), wp.array(scale, dtype=wp.float32, device=geom.device)], outputs=[out])
+    return out.numpy()
+
+
+def _energy(t: np.ndarray, referenced: np.ndarray) -> float:
+    """Mean radiance of a pass under a unit white sky: sqrt(4 pi) T_0, over referenced vertices and channels."""
+    if not referenced.any():
+        return 0.0
+    return float(np.sqrt(4 * np.pi) * t[referenced, :, 0].mean())
+
+
+@dataclasses.dataclass
+class DiffuseTransfer:
+    """Diffuse transfer vectors and how they were made.
+
+    transfer : (V, 3, order^2) float32, kd/pi included, every pass summed
+    passes   : per pass (direct first) its (V, 3, order^2) array when ``keep_passes``, else empty
+    energy   : per pass its energy (mean response to a unit white sky)
+    """
+
+    transfer: np.ndarray
+    mode: str
+    order: int
+    rays: int
+    energy: list[float]
+    passes: list[np.ndarray]
+    seconds: float
+    threshold: float
+
+
+def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", rays: int = 256, bounces: int = 4,
+                     threshold: float = 1e-3, rotate: bool = False, seed: int = 0, keep_passes: bool = False,
+                     progress=None) -> DiffuseTransfer:
+    """Per-vertex diffuse transfer vectors (P-10 and the interreflection passes; module docstring).
+
+    ``mode``: unshadowed (closed form), shadowed or interreflected (``bounces`` passes at most after the direct
+    one, stopping once a pass' energy is below ``threshold`` times the direct energy). ``progress(done, total)``
+    is called after each pass.
+    """
+    if mode not in MODES:
+        raise LodprtError(f"transfer mode {mode!r}: choose one of {', '.join(MODES)}")
+    if isinstance(order, bool) or int(order) != order or not 1 <= order <= 8:
+        raise LodprtError(f"sh order {order!r}: the transfer kernels offer orders 1..8")
+    if bounces < 0 or not np.isfinite(threshold) or threshold < 0:
+        raise LodprtError(f"bounces {bounces} and threshold {threshold} must be >= 0")
+    from lodprt.kernels import transfer as ktr
+
+    wp = warp()
+    t0 = time.perf_counter()
+    scale = (geom.albedo / np.pi)[:, :, None]  # (V, 3, 1)
+    if mode == "unshadowed":
+        g = unshadowed_transfer_closed_form(geom, order=order)
+    else:
+        g = geometric_transfer(geom, order=order, rays=rays, shadowed=True, rotate=rotate, seed=seed)
+    cur = (scale * g[:, None, :]).astype(np.float32)
+    cur[~geom.referenced] = 0
+    total = cur.astype(np.float64)
+    passes = [cur] if keep_passes else []
+    energy = [_energy(cur, geom.referenced)]
+    if progress:
+        progress(1, 1 + (bounces if mode == "interreflected" else 0))
+    if mode == "interreflected" and energy[0] > 0:
+        mesh, pts, nrm, faces2d = geom._warp()
+        n = len(geom.positions)
+        k = 3 * order * order
+        dirs = _dirs(rays, geom.device)
+        for b in range(bounces):
+            prev = wp.array(cur.reshape(n, k), dtype=wp.float32, device=geom.device)
+            out = wp.zeros((n, k), dtype=wp.float32, device=geom.device)
+            wp.launch(ktr.diffuse_bounce, dim=n, device=geom.device,
+                      inputs=[mesh.id, pts, nrm, faces2d, dirs, int(rotate), int(seed) + b + 1, float(geom.offset),
+                              geom.max_dist, prev], outputs=[out])
+            cur = (scale * out.numpy().reshape(n, 3, order * order)).astype(np.float32)
+            cur[~geom.referenced] = 0
+            total += cur
+            e = _energy(cur, geom.referenced)
+            energy.append(e)
+            if keep_passes:
+                passes.append(cur)
+            if progress:
+                progress(b + 2, 1 + bounces)
+            log.info("bounce %d: energy %.4g (%.3g of direct)", b + 1, e, e / energy[0])
+            if e < threshold * energy[0]:
+                break
+    return DiffuseTransfer(total.astype(np.float32), mode, order, rays, energy, passes, time.perf_counter() - t0, threshold)
+
+
+def glossy_transfer(geom: Geometry, ids=None, *, order: int = 3, lighting_order: int | None = None, rays: int = 256,
+                    mode: str = "shadowed", rotate: bool = False, seed: int = 0, chunk: int = 1 << 14) -> np.ndarray:
+    """Glossy transfer matrices M_ij = integral V(s) H(n.s) y_i(s) y_j(s) ds (P-11) for vertices ``ids``.
+
+    Returns (G, order^2, lighting_order^2) float32 (square unless ``lighting_order`` differs). ``mode``:
+    ``shadowed`` (P-11), ``hemisphere`` (no occlusion), ``none`` (the full sphere: M tends to the identity).
+    """
+    from lodprt.kernels import transfer as ktr
+
+    if mode not in GLOSSY_MODES:
+        raise LodprtError(f"glossy mode {mode!r}: choose one of {', '.join(GLOSSY_MODES)}")
+    lighting_order = order if lighting_order is None else int(lighting_order)
+    for o in (order, lighting_order):
+        if isinstance(o, bool) or int(o) != o or not 1 <= o <= 8:
+            raise LodprtError(f"glossy order {o!r}: the transfer kernels offer orders 1..8")
+    wp = warp()
+    mesh, pts, nrm, _ = geom._warp()
+    ids = np.nonzero(geom.referenced)[0] if ids is None else np.asarray(ids)
+    ids = ids.astype(np.int32)
+    no, ni = order * order, lighting_order * lighting_order
+    big = max(order, lighting_order) ** 2
+    out = np.zeros((len(ids), no, ni), np.float32)
+    dirs = _dirs(rays, geom.device)
+    for s in range(0, len(ids), chunk):
+        sub = ids[s : s + chunk]
+        res = wp.zeros((len(sub), no, ni), dtype=wp.float32, device=geom.device)
+        scratch = wp.zeros((len(sub), big), dtype=wp.float32, device=geom.device)
+        wp.launch(ktr.glossy_transfer, dim=len(sub), device=geom.device,
+                  inputs=[mesh.id, pts, nrm, wp.array(sub, dtype=wp.int32, device=geom.device), dirs, int(rotate),
+                          int(seed), int(order), int(lighting_order), float(geom.offset), GLOSSY_MODES[mode],
+                          geom.max_dist, scratch], outputs=[res])
+        out[s : s + len(sub)] = res.numpy()
+    return out
+
+
+def closest_hits(geom: Geometry, origins, directions) -> tuple[np.ndarray, np.ndarray]:
+    """The closest-hit query ``diffuse_bounce`` uses: (face (N,) int32, -1 on a miss; barycentric weights (N, 3))."""
+    from lodprt.kernels import transfer as ktr
+
+    wp = warp()
+    mesh, _, _, _ = geom._warp()
+    o = wp.array(np.asarray(origins, np.float32), dtype=wp.vec3, device=geom.device)
+    d = wp.array(np.asarray(directions, np.float32), dtype=wp.vec3, device=geom.device)
+    face = wp.zeros(len(o), dtype=wp.int32, device=geom.device)
+    bary = wp.zeros(len(o), dtype=wp.vec3, device=geom.device)
+    wp.launch(ktr.closest_hits, dim=len(o), device=geom.device, inputs=[mesh.id, o, d, geom.max_dist], outputs=[face, bary])
+    return face.numpy(), bary.numpy()
+
+
+# -- bake and store ---------------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class TransferBake:
+    path: Path | None
+    diffuse: DiffuseTransfer
+    glossy_ids: np.ndarray
+    glossy: np.ndarray | None
+    seconds: float
+    load_seconds: float
+    device: str
+
+
+def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", rays: int = 256, bounces: int = 4,
+                  threshold: float = 1e-3, glossy: bool = True, glossy_order: int | None = None,
+                  glossy_mode: str = "shadowed", rotate: bool = False, seed: int = 0, environment=None,
+                  device: str | None = None, overwrite: bool = False, progress=None) -> TransferBake:
+    """Bake diffuse transfer vectors for every vertex and glossy matrices for vertices whose material has ks > 0.
+
+    Writes a ``lodprt-transfer`` store (docs/FORMAT.md, "Environment transfer store") to ``out`` unless it is
+    None. ``environment`` (an :class:`lodprt.environment.Environment`) is optional: its coefficients are stored
+    as the default lighting for rendering. The transfer itself does not depend on the lighting.
+    """
+    from lodprt import __version__
+
+    device = resolve_device(device)
+    if out is not None:
+        _check_destination(Path(out), overwrite=overwrite)
+    t_load = load_kernels(device)
+    t0 = time.perf_counter()
+    geom = Geometry.from_scene(scene, device=device)
+    diffuse = diffuse_transfer(geom, order=order, mode=mode, rays=rays, bounces=bounces, threshold=threshold,
+                               rotate=rotate, seed=seed, progress=progress)
+    ks = np.array([m.ks for m in scene.materials])
+    gids = np.nonzero(geom.referenced & (ks[scene.material_id] > 0))[0].astype(np.int32) if glossy else np.zeros(0, np.int32)
+    gorder = glossy_order or order
+    gmat = glossy_transfer(geom, gids, order=gorder, lighting_order=order, rays=rays, mode=glossy_mode,
+                           rotate=rotate, seed=seed) if len(gids) else None
+    seconds = time.perf_counter() - t0
+    result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device)
+    if out is None:
+        return result
+    import zarr
+
+    path = Path(out)
+    partial = path.with_name(f"{path.name}.partial-{os.getpid()}")
+    if partial.exists():
+        shutil.rmtree(partial)
+    try:
+        root = zarr.open_group(str(partial), mode="w-", zarr_format=3)
+
+        def arr(name, data):
+            data = np.ascontiguousarray(data)
+            a = root.create_array(name, shape=data.shape, dtype=data.dtype, chunks="auto")
+            if data.size:
+                a[...] = data
+
+        arr("scene/positions", scene.positions.astype(np.float32))
+        arr("scene/normals", scene.normals.astype(np.float32))
+        arr("scene/faces", scene.faces.astype(np.int32))
+        arr("scene/material_id", scene.material_id.astype(np.int32))
+        arr("materials/kd", np.array([m.kd for m in scene.materials], np.float32))
+        arr("materials/ks", np.array([m.ks for m in scene.materials], np.float32))
+        arr("materials/shininess", np.array([m.shininess for m in scene.materials], np.float32))
+        arr("transfer/diffuse", diffuse.transfer)
+        arr("transfer/glossy_vertex_ids", gids)
+        if gmat is not None:
+            arr("transfer/glossy", gmat)
+        if environment is not None:
+            arr("environment/coefficients", environment.project(order))
+            root.require_group("environment").attrs.update({"source": environment.source, "kind": environment.kind,
+                                                             "resolution": environment.resolution})
+        root.attrs.update(
+            format=TRANSFER_FORMAT,
+            format_version=TRANSFER_FORMAT_VERSION,
+            lodprt_version=__version__,
+            source=str(scene.source),
+            sh_order=int(order),
+            mode=mode,
+            rays=int(rays),
+            directions="spherical-fibonacci",
+            rotate_per_vertex=bool(rotate),
+            seed=int(seed),
+            bounces=len(diffuse.energy) - 1,
+            bounce_threshold=float(threshold),
+            pass_energy=[float(e) for e in diffuse.energy],
+            glossy_order=int(gorder) if gmat is not None else None,
+            glossy_mode=glossy_mode if gmat is not None else None,
+            ray_offset=float(geom.offset),
+            bake_seconds=float(seconds),
+            load_seconds=float(t_load),
+            device=device,
+        )
+        if path.exists():
+            _check_destination(path, overwrite=overwrite)
+            backup = path.with_name(f"{path.name}.replaced-{os.getpid()}")
+            path.rename(backup)
+            partial.rename(path)
+            shutil.rmtree(backup)
+        else:
+            partial.rename(path)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
+    result.path = path
+    return result
+
+
+def is_transfer_store(path) -> bool:
+    try:
+        doc = json.loads((Path(path) / "zarr.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return doc.get("attributes", {}).get("format") == TRANSFER_FORMAT
+
+
+def _check_destination(path: Path, *, overwrite: bool) -> None:
+    if not path.exists():
+        if not path.parent.exists():
+            raise StoreError(f"{path}: the folder {path.parent} does not exist")
+        return
+    if not overwrite:
+        raise StoreError(f"{path}: already exists; pass --overwrite (overwrite=True) to replace it")
+    if not is_transfer_store(path):
+        raise StoreError(f"{path}: exists and is not a lodprt transfer store; refusing to replace it even with --overwrite")
+
+
+class TransferStore:
+    """Read access to a ``lodprt-transfer`` store (docs/FORMAT.md)."""
+
+    def __init__(self, path):
+        import zarr
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise StoreError(f"{self.path}: no such store")
+        if not is_transfer_store(self.path):
+            raise StoreError(f"{self.path}: not a lodprt transfer store (zarr.json without attribute format='{TRANSFER_FORMAT}'; "
+                             "bake one with lodprt bake-environment)")
+        self.root = zarr.open_group(str(self.path), mode="r")
+        self.attrs = dict(self.root.attrs)
+        if self.attrs.get("format_version") != TRANSFER_FORMAT_VERSION:
+            raise StoreError(f"{self.path}: format_version {self.attrs.get('format_version')!r}; this lodprt reads "
+                             f"version {TRANSFER_FORMAT_VERSION}")
+
+    def read(self, name: str) -> np.ndarray:
+        try:
+            return self.root[name][...]
+        except KeyError as exc:
+            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
+
+    def has(self, name: str) -> bool:
+        try:
+            self.root[name]
+            return True
+        except KeyError:
+            return False
+
+    @property
+    def order(self) -> int:
+        return int(self.attrs["sh_order"])
