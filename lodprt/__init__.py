@@ -6,6 +6,9 @@ Public API (everything else may change)::
     result = lodprt.bake(scene, "out.zarr", sh_order=4, device="cpu")
     store = lodprt.open_store("out.zarr")
     rgb = store.radiance(sample=0, eye=(0.0, 0.5, 1.0))   # (V, 3) float32
+    rt = lodprt.open("out.zarr").runtime(error_bound=0.25, alpha=0.6)   # moving lights, view cut
+    rt.set_lights([(0.1, 0.3, 0.0)]); rt.set_camera((0, 0.4, 1.2), (0, 0.1, 0), fov=40, width=800, height=600)
+    frame = rt.update()                               # positions, triangles, coefficients, radiance, stats
 
 Names are imported on first use, so ``import lodprt`` stays cheap (Warp loads only when a kernel is needed).
 """
@@ -21,6 +24,11 @@ _LAZY = {
     "BakeResult": "lodprt.bake",
     "Store": "lodprt.store",
     "open_store": "lodprt.store",
+    "open": "lodprt.store",
+    "Runtime": "lodprt.runtime",
+    "Camera": "lodprt.runtime",
+    "Frame": "lodprt.runtime",
+    "LightInterpolator": "lodprt.lights",
 }
 
 __all__ = ["LodprtError", "SceneError", "StoreError", *_LAZY]

@@ -986,16 +986,40 @@ class Cut:
     def can_coarsen(self, node: int) -> bool:
         """Collapse rule: both children of ``node`` active, every active neighbour of theirs has a parent created
         after ``node`` (a root's missing parent counts as later)."""
+        node = self._check(node)
+        c0 = self.h.children[node, 0]
+        if c0 < 0 or not (self.active[c0] and self.active[self.h.children[node, 1]]):
+            return False
+        return not len(self.blockers_of_coarsen(node))
+
+    def blockers_of_coarsen(self, node: int) -> np.ndarray:
+        """Active neighbours of ``node``'s two active children that forbid collapsing them into ``node``: their
+        parent was created no later than ``node`` (empty when the collapse is allowed or the children are not
+        both active). The children's leaves are ``node``'s leaves: one slice, one pass."""
         h = self.h
         node = self._check(node)
         c0, c1 = h.children[node]
         if c0 < 0 or not (self.active[c0] and self.active[c1]):
-            return False
-        nb = np.union1d(self.neighbours(c0), self.neighbours(c1))
+            return np.zeros(0, np.int32)
+        lo, hi = h.leaf_range[node]
+        nb = np.unique(self.anc[self._nbr[self._ptr[lo] : self._ptr[hi]]])
         nb = nb[(nb != c0) & (nb != c1)]
         par = h.parent[nb]
         later = np.where(par < 0, np.iinfo(np.int32).max, h.creation[np.maximum(par, 0)])
-        return bool((later > h.creation[node]).all())
+        return nb[later <= h.creation[node]].astype(np.int32)
+
+    def try_coarsen(self, node: int) -> np.ndarray:
+        """Collapse the children of ``node`` when allowed; returns the blockers (empty: it collapsed, or there was
+        nothing to collapse because the children are not both active)."""
+        h = self.h
+        node = self._check(node)
+        c0, c1 = h.children[node]
+        if c0 < 0 or not (self.active[c0] and self.active[c1]):
+            return np.zeros(0, np.int32)
+        b = self.blockers_of_coarsen(node)
+        if not len(b):
+            self._collapse(node)
+        return b
 
     def refine(self, node: int) -> bool:
         """Split ``node`` into its two children when the split rule allows; returns whether it did."""
@@ -1014,12 +1038,15 @@ class Cut:
         it did."""
         if not self.can_coarsen(node):
             return False
+        self._collapse(node)
+        return True
+
+    def _collapse(self, node: int) -> None:
         c0, c1 = self.h.children[node]
         self.active[c0] = self.active[c1] = False
         self.active[node] = True
         lo, hi = self.h.leaf_range[node]
         self.anc[self.h.leaf_order[lo:hi]] = node
-        return True
 
     def force_refine(self, node: int) -> int:
         """Make ``node``'s split happen (seed 003, table 5.1 forced refinement): activate it by splitting its
@@ -1111,3 +1138,23 @@ def triangulate(h: Hierarchy, faces: np.ndarray, anc: np.ndarray, *, return_inde
     if return_index:
         return f[keep].astype(np.int32), np.flatnonzero(keep)
     return f[keep].astype(np.int32)
+
+
+def dependency_violations(h: Hierarchy, faces: np.ndarray, anc: np.ndarray) -> np.ndarray:
+    """(K, 2) int32 pairs ``(a, b)`` of adjacent active nodes that break the invariant every legal cut keeps:
+    ``creation[a] < creation[parent[b]]`` (a root's parent counts as later than everything).
+
+    Legal steps keep it (El-Sana & Varshney, thesis 3.2): a split of ``P`` needs every active neighbour ``n``
+    created before ``P``, the parent of both new children; a collapse into ``P`` needs every neighbour's parent
+    created after ``P``, and the neighbours it leaves were created before the children's parent ``P``, hence
+    before ``P``'s parent. The full and the base cut keep it. Adjacency: an original edge whose ends have
+    different active ancestors (``anc`` from ``active_ancestors``). Empty for a legal cut.
+    """
+    f = np.asarray(anc)[np.asarray(faces, np.int64)]
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    e = e[e[:, 0] != e[:, 1]]
+    e = np.unique(np.concatenate([e, e[:, ::-1]]), axis=0)
+    a, b = e[:, 0], e[:, 1]
+    pb = h.parent[b]
+    later = np.where(pb < 0, np.iinfo(np.int64).max, h.creation[np.maximum(pb, 0)].astype(np.int64))
+    return e[h.creation[a].astype(np.int64) >= later].astype(np.int32)

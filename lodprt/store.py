@@ -201,6 +201,12 @@ class Store:
             out[ids] = coeffs
         return out
 
+    def runtime(self, **options):
+        """A ``lodprt.runtime.Runtime`` over this store (moving lights, view-dependent cut); options as there."""
+        from lodprt.runtime import Runtime
+
+        return Runtime(self, **options)
+
     def radiance(self, sample: int, eye) -> np.ndarray:
         """Radiance toward ``eye`` of every vertex, (V, 3) float32, from the SH coefficients of ``sample`` (T-7),
         completed where the light cut did not keep a vertex.
@@ -315,3 +321,7 @@ def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:
 def open_store(path: str | os.PathLike) -> Store:
     """Open a bake store for reading; raises StoreError naming the path when it is not one."""
     return Store(path)
+
+
+#: ``lodprt.open(path)``: the same as ``open_store``
+open = open_store  # noqa: A001

@@ -1,0 +1,573 @@
+"""Run time (SPEC 5; thesis 3.4, eq. 12-15; seed 003 section 5): relight a baked scene with moving point lights
+and choose a view-dependent cut of the vertex hierarchy every frame.
+
+    rt = lodprt.open("bunny.zarr").runtime(error_bound=0.25, alpha=0.6)
+    rt.set_lights([(0.1, 0.28, 0.0)], colors=[(1.0, 0.9, 0.8)])
+    rt.set_camera(eye=(0, 0.3, 0.6), target=(0, 0.1, 0), fov=40, width=800, height=600)
+    frame = rt.update()          # Frame: positions, triangles, coefficients, radiance, stats
+
+What a frame does (docs/RUNTIME.md has the full story):
+
+1. **Lights** (T-12, ``lodprt.lights``): every light's weights over the light samples; the per-sample RGB factors
+   ``W[j, c] = sum_l I_lc w_lj`` (several lights add, thesis 3.4.1).
+2. **View cut** (T-13, T-14; seed 003 section 5): the cut of the vertex hierarchy is kept from frame to frame and
+   only moved. Refine-Candidates are the active internal nodes, Coarsen-Candidates the nodes whose two children
+   are both active. A candidate is *culled* when its normal cone faces away from the eye (T-13, widened by the
+   angle its bounding sphere subtends) or its bounding sphere lies outside the view frustum; otherwise its error
+   is ``alpha e_geo + (1 - alpha) e_lumi`` (T-14). Ready-to-refine: an active node, not culled, error above the
+   bound; ready-to-coarsen: a Coarsen-Candidate that is culled or whose error is at most the bound. Splits whose
+   El-Sana-Varshney dependencies are unmet are forced (their blockers split first, ``Cut.force_refine``);
+   collapses whose dependencies are unmet wait. A frame makes up to ``max_passes`` such passes over the
+   candidates (each pass costs the size of the cut, not of the mesh); the first frame converges from the base.
+3. **Triangulation** of the cut (original faces through the active ancestors, degenerate ones dropped).
+4. **Relighting**: the active vertices' completed coefficients, ``sum_j W[j, c] C_j`` (the light samples are
+   completed once, T-15, when the Runtime is made), and the radiance toward the eye (T-7).
+
+Errors (T-14): ``e_geo`` is the screen-space length of the node's error vector ``p - p'`` (both ends projected
+with the camera; an end behind the eye counts as 1) over the screen diagonal, clamped to [0, 1]. ``e_lumi`` is the
+spread (max - min) of the leaf radiances under the node for the current view and lights, over the display white
+``white`` (radiance shown as 1.0), clamped to [0, 1]. It is bounded from per-node data made once: for each light
+sample the width ``max - min`` over the node's leaves of every SH coefficient, so that
+``max_c sum_j W[j, c] sum_i width_jci |y_i(v)|`` (``v`` the direction from the node to the eye) is at least the
+true spread of any interpolated light toward ``v`` (the coefficient box of a weighted sum lies inside the
+weighted sum of the boxes). It costs O(samples x coefficients) per candidate instead of a pass over the leaves.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+
+import numpy as np
+
+from lodprt import sh
+from lodprt.errors import LodprtError
+from lodprt.hierarchy import Cut
+from lodprt.lights import LightInterpolator
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class Camera:
+    """Perspective camera: right-handed, looks from ``eye`` at ``target``, ``up`` (default y) is up on screen,
+    ``fov`` the vertical field of view in degrees, ``width`` x ``height`` pixels. ``near``/``far`` None: chosen
+    from the scene's bounds."""
+
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov: float = 40.0
+    width: int = 800
+    height: int = 600
+    near: float | None = None
+    far: float | None = None
+
+    def __post_init__(self):
+        for name in ("eye", "target", "up"):
+            v = np.asarray(getattr(self, name), np.float64)
+            if v.shape != (3,) or not np.isfinite(v).all():
+                raise LodprtError(f"camera {name}: expected 3 finite numbers, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        if not 0.0 < float(self.fov) < 180.0:
+            raise LodprtError(f"camera fov: {self.fov} degrees; must lie strictly between 0 and 180")
+        if int(self.width) < 1 or int(self.height) < 1:
+            raise LodprtError(f"camera size: {self.width} x {self.height}; width and height must be >= 1")
+        if self.near is not None and self.far is not None and not 0.0 < self.near < self.far:
+            raise LodprtError(f"camera near/far: {self.near}, {self.far}; need 0 < near < far")
+
+
+@dataclasses.dataclass
+class Frame:
+    """What one ``Runtime.update()`` produces for the display (all arrays are fresh copies).
+
+    vertex_ids (A,) int32 original vertex of each active node (store vertex order);
+    positions (A, 3) float32 and normals (A, 3) float32 of those vertices;
+    triangles (M, 3) int32 indices into ``positions`` (the view cut's mesh, degenerate faces dropped);
+    coefficients (A, 3, ncoef) float32 SH coefficients over the view direction of the outgoing radiance, RGB,
+    every light's interpolated and completed coefficients summed with its intensity applied (linear radiance);
+    radiance (A, 3) float32 linear RGB radiance toward ``camera.eye`` (T-7 per vertex);
+    lights (L, 3) float64 light positions as used (after clamping), light_colors (L, 3) float64 RGB intensities;
+    camera the ``Camera``; stats a dict (triangles, active_nodes, nodes_touched, refined, coarsened, ms_cut,
+    ms_triangulate, ms_relight, ms_total, ...).
+    """
+
+    vertex_ids: np.ndarray
+    positions: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray
+    coefficients: np.ndarray
+    radiance: np.ndarray
+    lights: np.ndarray
+    light_colors: np.ndarray
+    camera: Camera
+    stats: dict
+
+
+def clip_planes(view_proj: np.ndarray) -> np.ndarray:
+    """(6, 4) inward frustum planes (a, b, c, d) with unit (a, b, c) from a 4x4 view-projection matrix
+    (Gribb-Hartmann): a point x is inside when ``a x + b y + c z + d >= 0`` for all six."""
+    m = np.asarray(view_proj, np.float64)
+    planes = np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2], m[3] - m[2]])
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+def near_far(camera: Camera, bounds: np.ndarray) -> tuple[float, float]:
+    """The camera's near and far distances; unset ones from the scene's bounds (2, 3): far just beyond the
+    farthest corner, near at the box when the eye is outside it, else far * 1e-4."""
+    eye = np.asarray(camera.eye)
+    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    far = camera.far if camera.far is not None else 1.01 * float(np.linalg.norm(corners - eye, axis=1).max())
+    far = max(far, 1e-30)
+    if camera.near is not None:
+        return float(camera.near), float(far)
+    gap = float(np.linalg.norm(np.maximum(np.maximum(bounds[0] - eye, eye - bounds[1]), 0.0)))
+    return max(0.9 * gap, far * 1e-4), float(far)
+
+
+def _as_camera(camera=None, **kw) -> Camera:
+    if isinstance(camera, Camera):
+        if kw:
+            raise LodprtError("set_camera: pass either a Camera or its fields, not both")
+        return camera
+    if camera is not None:
+        kw["eye"] = camera
+    try:
+        return Camera(**kw)
+    except TypeError as exc:
+        raise LodprtError(f"set_camera: {exc}") from exc
+
+
+def view_projection(camera: Camera, bounds: np.ndarray) -> np.ndarray:
+    """4x4 projection @ view of ``camera`` (OpenGL clip space; near/far from ``near_far``)."""
+    from lodprt.render import look_at, perspective
+
+    near, far = near_far(camera, bounds)
+    return perspective(camera.fov, camera.width / camera.height, near, far) @ look_at(camera.eye, camera.target, camera.up)
+
+
+class Runtime:
+    """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
+
+    error_bound: refine above, coarsen at or below (T-14); alpha in [0, 1] weighs e_geo against e_lumi;
+    triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
+    so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
+    percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
+    (``lodprt.lights``); max_passes: refinement passes per frame after the first; lod=False: the full mesh;
+    device: the Warp device of the per-frame kernels (default: CUDA when present, else the CPU).
+    """
+
+    def __init__(self, store, *, error_bound: float = 0.25, alpha: float = 0.6, triangle_budget: int | None = None,
+                 white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 4,
+                 lod: bool = True, device: str | None = None, progress=None):
+        from lodprt.devices import resolve_device
+
+        self.device = resolve_device(device)
+        self.store = store
+        self.h = h = store.hierarchy()
+        self.faces = np.asarray(store.faces, np.int64)
+        self.positions = np.asarray(store.positions, np.float64)
+        self.normals = np.asarray(store.normals, np.float64)
+        self.bounds = np.array([self.positions.min(0), self.positions.max(0)]) if len(self.positions) else np.zeros((2, 3))
+        self.set_error_bound(error_bound, alpha)
+        if triangle_budget is not None and int(triangle_budget) < 1:
+            raise LodprtError(f"triangle_budget {triangle_budget}: must be >= 1")
+        self.triangle_budget = None if triangle_budget is None else int(triangle_budget)
+        if int(max_passes) < 1:
+            raise LodprtError(f"max_passes {max_passes}: must be >= 1")
+        self.max_passes = int(max_passes)
+        self.lod = bool(lod)
+        self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
+                                        weighting=weighting, outside=outside)
+        V, N = h.num_vertices, h.num_nodes
+        S = store.num_samples
+        self.order = store.sh_order
+        # T-15 once per sample (cached, SPEC 5), float32, vertex-major (V, S, C, ncoef): a vertex's samples are
+        # one contiguous block for the per-frame gathers
+        first = store._complete(0).astype(np.float32)
+        self.coeffs = np.empty((first.shape[0], S) + first.shape[1:], np.float32)
+        self.coeffs[:, 0] = first
+        for k in range(1, S):
+            self.coeffs[:, k] = store._complete(k)
+            if progress:
+                progress(k + 1, S)
+        self.channels = self.coeffs.shape[2]
+        self.ncoef = self.coeffs.shape[3]
+        self.width = self._coefficient_widths()
+        self.white = float(white) if white is not None else self._default_white()
+        if not self.white > 0 or not math.isfinite(self.white):
+            raise LodprtError(f"white {white}: must be a positive finite radiance")
+        # per-node geometry for the error terms
+        self.node_pos = self.positions[h.vertex]
+        internal = h.children[:, 1] >= 0
+        self.node_collapsed = np.where(internal[:, None], self.positions[h.vertex[np.maximum(h.children[:, 1], 0)]],
+                                       self.node_pos)
+        self.error_vector = h.error_vector.astype(np.float64)
+        self.axis = h.cone_axis.astype(np.float64)
+        self.half = h.cone_half_angle.astype(np.float64)
+        self.radius = h.radius.astype(np.float64)
+        self._upload()
+        self.cut = Cut.base(h, self.faces) if self.lod else Cut.full(h, self.faces)
+        self._converged_once = False
+        self._blocker = np.full(h.num_nodes, -1, np.int64)  # a finer neighbour that blocked this collapse
+        # faces around each original vertex (CSR), for the incremental triangulation
+        fv = self.faces.ravel()
+        order = np.argsort(fv, kind="stable")
+        self._vf = (order // 3).astype(np.int64)
+        self._vf_ptr = np.searchsorted(fv[order], np.arange(V + 1))
+        self._tri_anc = None
+        self._frame = 0  # errors cached per frame: culled, error and the frame they belong to
+        self._culled = np.zeros(h.num_nodes, bool)
+        self._err = np.zeros(h.num_nodes)
+        self._stamp = np.full(h.num_nodes, -1, np.int64)
+        self.camera: Camera | None = None
+        self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
+
+    # -- set-up ------------------------------------------------------------------------------------------------
+    def _coefficient_widths(self) -> np.ndarray:
+        """(N - V, S, C, ncoef) float16: per light sample, max - min over each internal node's leaves of every
+        completed coefficient, bottom-up one height level at a time (children always sit on lower levels)."""
+        from lodprt.hierarchy import node_heights
+
+        h = self.h
+        V, N = h.num_vertices, h.num_nodes
+        _, S, C, n = self.coeffs.shape
+        out = np.zeros((N - V, S, C, n), np.float16)
+        if N == V:
+            return out
+        hk = node_heights(h)
+        order = np.argsort(hk, kind="stable")
+        bounds = np.searchsorted(hk[order], np.arange(1, hk.max() + 2))
+        levels = [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
+        c0, c1 = h.children[:, 0], h.children[:, 1]
+        for j in range(S):
+            mn = np.empty((N, C * n), np.float32)
+            mn[:V] = self.coeffs[:, j].reshape(V, C * n)
+            mx = mn.copy()
+            for nodes in levels:
+                mn[nodes] = np.minimum(mn[c0[nodes]], mn[c1[nodes]])
+                mx[nodes] = np.maximum(mx[c0[nodes]], mx[c1[nodes]])
+            w = mx[V:] - mn[V:]
+            out[:, j] = np.minimum(w, np.finfo(np.float16).max).reshape(N - V, C, n)
+        return out
+
+    def _upload(self) -> None:
+        """The per-frame kernels' read-only inputs, on the device once."""
+        from lodprt.devices import warp
+
+        wp = warp()
+        dev = self.device
+        v3 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.vec3, device=dev)  # noqa: E731
+        f1 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.float32, device=dev)  # noqa: E731
+        self._wp = wp
+        self._d = {
+            "node_pos": v3(self.node_pos), "node_collapsed": v3(self.node_collapsed),
+            "error_vector": v3(self.error_vector), "axis": v3(self.axis), "half": f1(self.half),
+            "radius": f1(self.radius), "positions": v3(self.positions), "normals": v3(self.normals),
+            "width": wp.array(self.width, dtype=wp.float16, device=dev),
+            "coeffs": wp.array(self.coeffs, dtype=wp.float32, device=dev),
+        }
+
+    def _frame_inputs(self) -> tuple:
+        wp = self._wp
+        used = wp.array(self._used.astype(np.int32), dtype=wp.int32, device=self.device)
+        weights = wp.array(self.sample_weights.astype(np.float32), dtype=wp.float32, device=self.device)
+        return used, weights
+
+    def _default_white(self) -> float:
+        dc = np.abs(self.coeffs[:, :, :, 0]).max(2) * sh.basis(np.array([0.0, 0.0, 1.0]), 1)[0]
+        dc = dc * float(np.max(self.store.intensity))
+        pos = dc[dc > 0]
+        return float(np.percentile(pos, 99)) if pos.size else 1.0
+
+    def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
+        """T-14 error bound (>= 0) and, when given, alpha in [0, 1]."""
+        e = float(error_bound)
+        if not e >= 0 or not math.isfinite(e):
+            raise LodprtError(f"error_bound {error_bound}: must be a finite number >= 0")
+        self.error_bound = e
+        if alpha is not None:
+            a = float(alpha)
+            if not 0.0 <= a <= 1.0:
+                raise LodprtError(f"alpha {alpha}: must lie in [0, 1]")
+            self.alpha = a
+
+    def set_lod(self, enabled: bool) -> None:
+        """LOD off shows the full mesh (every leaf active); on starts again from the base mesh."""
+        self.lod = bool(enabled)
+        self.cut = Cut.base(self.h, self.faces) if self.lod else Cut.full(self.h, self.faces)
+        self._converged_once = False
+        self._blocker[:] = -1
+
+    def set_lights(self, positions, colors=None) -> None:
+        """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
+        Outside the sampled region: clamped with a warning, or an error (``outside``)."""
+        pos = np.asarray(positions, np.float64)
+        if pos.ndim == 1:
+            pos = pos[None, :]
+        if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) < 1:
+            raise LodprtError(f"lights: expected (L, 3) positions with L >= 1, got shape {pos.shape}")
+        if colors is None:
+            col = np.repeat(np.asarray(self.store.intensity, np.float64)[None, :], len(pos), axis=0)
+        else:
+            col = np.asarray(colors, np.float64)
+            if col.ndim == 1:
+                col = col[None, :]
+            if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
+                raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
+        idx, w, moved = self.interp.weights(pos)
+        W = np.zeros((len(self.interp.samples), 3))
+        np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))  # lights add (thesis 3.4.1)
+        self.light_positions = self.interp.clamp(pos)[0]
+        self.light_colors = col
+        self.lights_clamped = int(moved.sum())
+        self.sample_weights = W
+        self._used = np.flatnonzero(np.abs(W).sum(1) > 0)
+
+    def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
+                   near=None, far=None) -> Camera:
+        """A ``Camera`` or its fields (``set_camera(eye, target, up, fov, width, height)``)."""
+        if isinstance(camera, Camera):
+            self.camera = camera
+        else:
+            self.camera = _as_camera(camera, target=target, up=up, fov=fov, width=width, height=height,
+                                     near=near, far=far)
+        self._vp = view_projection(self.camera, self.bounds)
+        self._planes = clip_planes(self._vp)
+        return self.camera
+
+    # -- errors ------------------------------------------------------------------------------------------------
+    def node_errors(self, nodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For internal ``nodes`` (K,): culled (K,) bool (T-13 back-facing or outside the frustum), error (K,)
+        ``alpha e_geo + (1 - alpha) e_lumi`` (T-14), e_geo (K,), e_lumi (K,); float32 Warp kernel
+        (``lodprt.kernels.runtime.view_errors``) on the Runtime's device."""
+        from lodprt.kernels import runtime as kr
+
+        if self.camera is None:
+            raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
+        wp, dev, d = self._wp, self.device, self._d
+        nodes = np.asarray(nodes, np.int32)
+        K = len(nodes)
+        outs = [wp.zeros(K, dtype=wp.uint8, device=dev)] + [wp.zeros(K, dtype=wp.float32, device=dev) for _ in range(3)]
+        if K:
+            cam = self.camera
+            used, weights = self._frame_inputs()
+            wp.launch(kr.view_errors, dim=K, device=dev, inputs=[
+                wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
+                d["error_vector"], d["axis"], d["half"], d["radius"],
+                wp.array(self._planes.astype(np.float32), dtype=wp.vec4, device=dev),
+                wp.mat44(*self._vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
+                0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), used, weights, d["width"],
+                self.order, self.white, self.alpha, wp.empty((K, self.order * self.order), dtype=wp.float32, device=dev),
+            ], outputs=outs)
+        culled, err, geo, lumi = (o.numpy() for o in outs)
+        return culled.astype(bool), err.astype(np.float64), geo.astype(np.float64), lumi.astype(np.float64)
+
+    def node_errors_reference(self, nodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``node_errors`` in float64 numpy (the tests' reference for the kernel)."""
+        if self.camera is None:
+            raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
+        nodes = np.asarray(nodes, np.int64)
+        cam = self.camera
+        eye = np.asarray(cam.eye)
+        p = self.node_pos[nodes]
+        r = self.radius[nodes]
+        # outside the frustum: the bounding sphere is entirely behind one plane
+        s = p @ self._planes[:, :3].T + self._planes[:, 3]
+        outside = (s < -r[:, None]).any(1)
+        # T-13 back-facing: every normal in the cone is more than 90 degrees from every direction to the eye
+        v = eye - p
+        d = np.linalg.norm(v, axis=1)
+        vh = v / np.where(d > 0, d, 1.0)[:, None]
+        ang = np.arccos(np.clip((vh * self.axis[nodes]).sum(1), -1.0, 1.0))
+        spread = np.arcsin(np.clip(r / np.where(d > 0, d, 1.0), 0.0, 1.0))
+        back = (d > r) & (ang > 0.5 * np.pi + self.half[nodes] + spread)
+        culled = outside | back
+        # e_geo: the error vector p - p' on screen over the screen diagonal
+        a = self.node_collapsed[nodes]
+        b = a - self.error_vector[nodes]
+        ca = np.c_[a, np.ones(len(a))] @ self._vp.T
+        cb = np.c_[b, np.ones(len(b))] @ self._vp.T
+        tiny = 1e-12
+        behind = (ca[:, 3] <= tiny) | (cb[:, 3] <= tiny)
+        half_wh = 0.5 * np.array([cam.width, cam.height], np.float64)
+        sa = ca[:, :2] / np.where(behind, 1.0, ca[:, 3])[:, None] * half_wh
+        sb = cb[:, :2] / np.where(behind, 1.0, cb[:, 3])[:, None] * half_wh
+        e_geo = np.where(behind, 1.0, np.linalg.norm(sa - sb, axis=1) / math.hypot(cam.width, cam.height))
+        e_geo = np.clip(e_geo, 0.0, 1.0)
+        # e_lumi: bound on the spread of the leaf radiances toward the eye
+        yabs = np.abs(sh.basis(vh, self.order)).astype(np.float32)
+        acc = np.zeros((len(nodes), 3))
+        internal = nodes - self.h.num_vertices
+        for j in self._used:
+            wj = (self.width[internal, j].astype(np.float32) * yabs[:, None, :]).sum(-1)  # (K, C)
+            acc += wj * self.sample_weights[j][None, :]  # C = 1 (grey) broadcasts over R, G, B
+        e_lumi = np.clip(np.abs(acc).max(1) / self.white, 0.0, 1.0)
+        err = self.alpha * e_geo + (1.0 - self.alpha) * e_lumi
+        return culled, err, e_geo, e_lumi
+
+    # -- frames ------------------------------------------------------------------------------------------------
+    def _pass(self) -> tuple[int, int, int]:
+        """One refinement pass over the candidate lists; returns (refined, coarsened, nodes touched)."""
+        h, cut = self.h, self.cut
+        V = h.num_vertices
+        act = np.flatnonzero(cut.active)
+        rc = act[act >= V]  # Refine-Candidates
+        par = h.parent[act]
+        par = np.unique(par[par >= 0])
+        cc = par[cut.active[h.children[par, 0]] & cut.active[h.children[par, 1]]]  # Coarsen-Candidates
+        nodes = np.concatenate([rc, cc])
+        if not len(nodes):
+            return 0, 0, 0
+        # errors depend on the frame's camera and lights only: each node is evaluated once per frame
+        fresh = self._stamp[nodes] != self._frame
+        if fresh.any():
+            new = nodes[fresh]
+            c, e, _, _ = self.node_errors(new)
+            self._culled[new], self._err[new], self._stamp[new] = c, e, self._frame
+        culled, err = self._culled[nodes], self._err[nodes]
+        k = len(rc)
+        want_refine = ~culled[:k] & (err[:k] > self.error_bound)
+        want_coarsen = culled[k:] | (err[k:] <= self.error_bound)
+        refined = coarsened = touched = 0
+        # a collapse found blocked waits until the finer neighbour found blocking it is gone (one per node)
+        todo = cc[want_coarsen]
+        blk = self._blocker[todo]
+        todo = todo[(blk < 0) | ~cut.active[np.maximum(blk, 0)]]
+        for P in todo[np.argsort(err[k:][want_coarsen][(blk < 0) | ~cut.active[np.maximum(blk, 0)]], kind="stable")]:
+            P = int(P)
+            touched += 1
+            b = cut.try_coarsen(P)
+            self._blocker[P] = b[0] if len(b) else -1
+            coarsened += not len(b)
+        order = np.argsort(-err[:k][want_refine], kind="stable")
+        for node in rc[want_refine][order]:
+            node = int(node)
+            if not cut.active[node]:
+                continue  # split already by a forced refinement, or coarsened away this pass
+            touched += 1
+            if cut.refine(node):
+                refined += 1
+            else:
+                n = cut.force_refine(node)
+                refined += n
+                touched += n
+        return refined, coarsened, touched
+
+    def update(self, *, max_passes: int | None = None) -> Frame:
+        """Move the cut for the current camera and lights, triangulate it, relight it: a ``Frame``."""
+        if self.camera is None:
+            raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
+        t0 = time.perf_counter()
+        self._frame += 1
+        refined = coarsened = touched = passes = 0
+        if self.lod:
+            limit = max_passes if max_passes is not None else (self.max_passes if self._converged_once else 10_000)
+            for _ in range(int(limit)):
+                r, c, t = self._pass()
+                passes += 1
+                refined, coarsened, touched = refined + r, coarsened + c, touched + t
+                if r == 0 and c == 0:
+                    break
+            self._converged_once = True
+        t1 = time.perf_counter()
+        h = self.h
+        vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
+        lut = np.full(h.num_vertices, -1, np.int32)
+        lut[vid] = np.arange(len(vid), dtype=np.int32)
+        tri = lut[self._triangles()]
+        t2 = time.perf_counter()
+        coef, rad = self._relight(vid)
+        t3 = time.perf_counter()
+        if self.triangle_budget is not None:  # steer the bound toward the budget
+            if len(tri) > self.triangle_budget:
+                self.error_bound = max(self.error_bound, 1e-4) * 1.25
+            elif len(tri) < 0.8 * self.triangle_budget:
+                self.error_bound /= 1.1
+        stats = {
+            "triangles": int(len(tri)),
+            "active_nodes": int(len(vid)),
+            "vertices": int(len(vid)),
+            "nodes_touched": int(touched),
+            "refined": int(refined),
+            "coarsened": int(coarsened),
+            "passes": int(passes),
+            "error_bound": float(self.error_bound),
+            "alpha": float(self.alpha),
+            "lights_clamped": int(self.lights_clamped),
+            "ms_cut": 1e3 * (t1 - t0),
+            "ms_triangulate": 1e3 * (t2 - t1),
+            "ms_relight": 1e3 * (t3 - t2),
+            "ms_total": 1e3 * (t3 - t0),
+        }
+        return Frame(vertex_ids=vid, positions=self.positions[vid].astype(np.float32),
+                     normals=self.normals[vid].astype(np.float32), triangles=tri.astype(np.int32),
+                     coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
+                     light_colors=self.light_colors.copy(), camera=self.camera, stats=stats)
+
+    def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(A, 3, ncoef) interpolated coefficients and (A, 3) radiance toward the eye of vertices ``vid``
+        (``lodprt.kernels.runtime.relight``)."""
+        from lodprt.kernels import runtime as kr
+
+        wp, dev, d = self._wp, self.device, self._d
+        A = len(vid)
+        coef = wp.zeros((A, 3, self.ncoef), dtype=wp.float32, device=dev)
+        rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
+        if A:
+            used, weights = self._frame_inputs()
+            wp.launch(kr.relight, dim=A, device=dev, inputs=[
+                wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), d["positions"], d["normals"],
+                wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"], self.order,
+                wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)], outputs=[coef, rad])
+        return coef.numpy(), rad.numpy()
+
+    def _triangles(self) -> np.ndarray:
+        """The cut's triangles in original vertex ids (T-3.2 triangulation), kept up to date incrementally: only
+        the original faces around vertices whose active ancestor changed since the last frame are mapped again."""
+        anc = self.cut.anc
+        if self._tri_anc is None:
+            f = self.h.vertex[anc[self.faces]]
+            self._fmap = f.astype(np.int32)
+            self._flive = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+        else:
+            moved = np.flatnonzero(anc != self._tri_anc)
+            if len(moved):
+                lo, hi = self._vf_ptr[moved], self._vf_ptr[moved + 1]
+                n = hi - lo
+                idx = np.repeat(lo - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
+                fs = np.unique(self._vf[idx])
+                f = self.h.vertex[anc[self.faces[fs]]]
+                self._fmap[fs] = f
+                self._flive[fs] = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+        self._tri_anc = anc.copy()
+        return self._fmap[self._flive]
+
+    # -- full resolution ---------------------------------------------------------------------------------------
+    def coefficients(self, vertex_ids=None) -> np.ndarray:
+        """(K, 3, ncoef) float32 RGB coefficients of the current lights at ``vertex_ids`` (default: every vertex):
+        ``sum_j W[j, c] C_j`` over the completed light samples (T-12 weights, intensities applied)."""
+        ids = np.arange(self.h.num_vertices) if vertex_ids is None else np.asarray(vertex_ids, np.int64)
+        u = self._used
+        c = self.coeffs[ids[:, None], u[None, :]]  # (K, U, C, ncoef)
+        w = self.sample_weights[u].astype(np.float32)  # (U, 3)
+        if self.channels == 1:
+            return np.einsum("kui,uc->kci", c[:, :, 0], w, optimize=True)
+        return np.einsum("kuci,uc->kci", c, w, optimize=True)
+
+    def radiance(self, eye) -> np.ndarray:
+        """(V, 3) float32 radiance toward ``eye`` of every vertex under the current lights (full resolution,
+        completed, interpolated); vertices no face uses read 0."""
+        from lodprt.store import radiance_toward
+
+        return radiance_toward(self.positions, self.normals, self.coefficients(), eye, np.ones(3))
+
+    def check(self) -> None:
+        """Raise LodprtError unless the current cut is legal (``hierarchy.dependency_violations``)."""
+        from lodprt.hierarchy import dependency_violations
+
+        bad = dependency_violations(self.h, self.faces, self.cut.anc)
+        if len(bad):
+            raise LodprtError(f"the view cut violates {len(bad)} dependencies, e.g. nodes {bad[0].tolist()}")
