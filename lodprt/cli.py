@@ -1,4 +1,4 @@
-"""The ``lodprt`` command line: bake, info, radiance, diff.
+"""The ``lodprt`` command line: bake, info, radiance, diff, render, compare, turntable, view.
 
 Errors lodprt raises on purpose (bad scene, bad store, unavailable device) are printed as one line naming the file
 and field, with exit code 2; anything else is a bug and keeps its traceback.
@@ -31,6 +31,53 @@ def _sample_output_args(p: argparse.ArgumentParser, output: str) -> None:
     p.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
     p.add_argument("-o", "--out", required=True, metavar=output, help=f"output {Path(output).suffix} (not replaced without --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+
+
+def _view_args(p: argparse.ArgumentParser, output: str | None, *, required: bool = True) -> None:
+    """The arguments of the display commands: store, lights, camera, view cut, drawing, output."""
+    p.add_argument("store", metavar="OUT.zarr")
+    p.add_argument("--light", type=float, nargs=3, action="append", required=required, metavar=("X", "Y", "Z"),
+                   help="a point light's position (repeat for several lights)")
+    p.add_argument("--color", type=float, nargs=3, action="append", default=None, metavar=("R", "G", "B"),
+                   help="RGB intensity of each --light, in order (default: the bake's intensity)")
+    p.add_argument("--eye", type=float, nargs=3, required=required, default=None, metavar=("X", "Y", "Z"),
+                   help="eye position" + ("" if required else " (default: a three-quarter view of the scene)"))
+    p.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"), help="look-at point (default: scene centre)")
+    p.add_argument("--up", type=float, nargs=3, default=(0.0, 1.0, 0.0), metavar=("X", "Y", "Z"), help="up direction (default +y)")
+    p.add_argument("--fov", type=float, default=40.0, metavar="DEG", help="vertical field of view in degrees (default 40)")
+    p.add_argument("--size", type=int, nargs=2, default=(800, 600), metavar=("W", "H"), help="image size in pixels (default 800 600)")
+    p.add_argument("--error-bound", type=float, default=0.25, metavar="E", help="view cut error bound (T-14, default 0.25)")
+    p.add_argument("--alpha", type=float, default=0.6, metavar="A", help="weight of the geometric error against the luminance error (default 0.6)")
+    p.add_argument("--full", action="store_true", help="LOD off: draw the full-resolution mesh")
+    p.add_argument("--wireframe", action="store_true", help="overlay the triangles of the cut")
+    p.add_argument("--per-vertex", action="store_true", help="radiance per vertex, interpolated (default: per fragment from interpolated SH)")
+    p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops (tone mapping, default 0)")
+    p.add_argument("--white", type=float, default=None, metavar="L", help="linear radiance shown as white (default: the run time's white point)")
+    p.add_argument("--no-markers", action="store_true", help="do not draw the lights as markers")
+    if output is not None:
+        p.add_argument("-o", "--out", required=True, metavar=output, help="output (not replaced without --overwrite)")
+        p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+
+
+def _view_setup(args, store):
+    """(lights, colors, Camera) from the display arguments."""
+    from lodprt.render import default_eye, scene_centre
+    from lodprt.runtime import Camera
+
+    lights = args.light if args.light else [store.light_positions[store.num_samples // 2].tolist()]
+    colors = args.color
+    if colors is not None and len(colors) != len(lights):
+        raise LodprtError(f"--color: {len(colors)} given for {len(lights)} --light; give one per light or none")
+    eye = args.eye if args.eye is not None else default_eye(store)
+    target = args.target if args.target is not None else scene_centre(store)
+    camera = Camera(eye=tuple(eye), target=tuple(target), up=tuple(args.up), fov=args.fov, width=args.size[0],
+                    height=args.size[1])
+    return lights, colors, camera
+
+
+def _draw_options(args) -> dict:
+    return {"wireframe": args.wireframe, "per_vertex": args.per_vertex, "exposure": args.exposure,
+            "white": args.white, "light_markers": not args.no_markers}
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -85,8 +132,103 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--size", type=int, nargs=2, default=(640, 480), metavar=("W", "H"), help="each panel's size in pixels")
     d.add_argument("--scale", type=float, default=None, metavar="S", help="error that maps to the top of the colour scale (default: the largest)")
     d.add_argument("--device", default=None, metavar="DEV", help="Warp device for the full-resolution re-bake")
+
+    rn = sub.add_parser(
+        "render",
+        help="render one frame offscreen (moving lights, view cut) to a PNG or a linear .npy",
+        description="Relight the store with the given point lights, choose the view cut for the camera and draw "
+        "it offscreen (EGL). A .png is tone-mapped sRGB; a .npy is the linear radiance image (H, W, 3) float32, "
+        "background 0, no overlays. Camera: perspective, vertical field of view, right-handed, y up (docs/DISPLAY.md).",
+    )
+    _view_args(rn, "frame.png|frame.npy")
+    cp = sub.add_parser(
+        "compare",
+        help="figure: LOD frame, full-resolution frame and their difference side by side (figures 14-17)",
+        description="Render the view-cut frame and the full-resolution frame for the same lights and camera, and "
+        "their per-pixel difference in false colour with its scale, side by side in one PNG.",
+    )
+    _view_args(cp, "fig.png")
+    cp.add_argument("--scale", type=float, default=None, metavar="S",
+                    help="difference (relative to white) at the top of the colour scale (default: the largest)")
+    tt = sub.add_parser(
+        "turntable",
+        help="an orbit of the camera with moving lights: PNG sequence (a folder) or an animated GIF",
+        description="Orbit the camera around the target (and the lights around the vertical axis through it) "
+        "and write every frame: OUT a folder gets frame_0000.png ..., OUT ending in .gif an animated GIF.",
+    )
+    _view_args(tt, "DIR|video.gif", required=False)
+    tt.add_argument("--frames", type=int, default=36, metavar="N", help="frames per orbit (default 36)")
+    tt.add_argument("--light-turns", type=float, default=1.0, metavar="T",
+                    help="turns the lights make about the vertical axis per orbit (default 1; 0 keeps them still)")
+    tt.add_argument("--fps", type=float, default=12.0, metavar="F", help="GIF frame rate (default 12)")
+    vw = sub.add_parser(
+        "view",
+        help="interactive viewer (orbit, drag lights, error bound and alpha, wireframe, LOD toggle)",
+        description="Open a window on the store: drag to orbit, right-drag to pan, wheel to zoom, shift-drag to "
+        "move the selected light; keys in docs/DISPLAY.md (H prints them). Needs a display (X11 or Xvfb).",
+    )
+    _view_args(vw, None, required=False)
+    vw.add_argument("--frames", type=int, default=None, metavar="N", help="close after N frames (smoke tests)")
+    vw.add_argument("--screenshot", default=None, metavar="PNG", help="save the last frame drawn as a PNG")
     environment_cli.add_parsers(sub)  # irradiance, bake-environment, render-environment
     return p
+
+
+def _cmd_render(args) -> int:
+    from lodprt.render import render_to_file
+    from lodprt.store import open_store
+
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    stats = render_to_file(store, args.out, lights=lights, colors=colors, camera=camera, error_bound=args.error_bound,
+                           alpha=args.alpha, lod=not args.full, overwrite=args.overwrite, **_draw_options(args))
+    print(f"wrote {args.out}: {stats['triangles']:,} triangles ({'view cut' if stats['lod'] else 'full resolution'}), "
+          f"frame {stats.get('ms_total', 0.0):.0f} ms, draw {stats['ms_draw']:.0f} ms")
+    return 0
+
+
+def _cmd_compare(args) -> int:
+    from lodprt.compare import compare_figure
+    from lodprt.store import open_store
+
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    opts = _draw_options(args)
+    opts.pop("light_markers")
+    numbers = compare_figure(store, args.out, lights=lights, colors=colors, camera=camera,
+                             error_bound=args.error_bound, alpha=args.alpha, overwrite=args.overwrite,
+                             scale=args.scale, markers=not args.no_markers, **opts)
+    print(f"wrote {args.out}: {numbers['triangles_lod']:,} of {numbers['triangles_full']:,} triangles, PSNR "
+          f"{numbers['psnr_db']:.1f} dB, relative RMSE {numbers['relative_rmse']:.4f}")
+    return 0
+
+
+def _cmd_turntable(args) -> int:
+    from lodprt.render import turntable
+    from lodprt.store import open_store
+
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    written = turntable(store, args.out, lights=lights, colors=colors, camera=camera, frames=args.frames,
+                        light_turns=args.light_turns, fps=args.fps, error_bound=args.error_bound, alpha=args.alpha,
+                        lod=not args.full, overwrite=args.overwrite, **_draw_options(args))
+    print(f"wrote {written}")
+    return 0
+
+
+def _cmd_view(args) -> int:
+    from lodprt.store import open_store
+    from lodprt.viewer import run_viewer
+
+    if args.screenshot is not None:
+        from lodprt.render import check_output
+
+        check_output(args.screenshot, (".png",), overwrite=True)
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    return run_viewer(store, lights=lights, colors=colors, camera=camera, error_bound=args.error_bound,
+                      alpha=args.alpha, lod=not args.full, frames=args.frames, screenshot=args.screenshot,
+                      **_draw_options(args))
 
 
 def _cmd_diff(args) -> int:
@@ -206,6 +348,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
     commands = {"bake": _cmd_bake, "info": _cmd_info, "radiance": _cmd_radiance, "diff": _cmd_diff,
+                "render": _cmd_render, "compare": _cmd_compare, "turntable": _cmd_turntable, "view": _cmd_view,
                 **environment_cli.COMMANDS}
     try:
         return commands[args.command](args)

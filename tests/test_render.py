@@ -277,3 +277,73 @@ def test_light_weights_t12():
     assert len(idx) == 8 and np.isclose(w.sum(), 1) and np.all(np.diff(d) >= 0)
     np.testing.assert_allclose(w, (1 - d / d.max()) ** 4 / ((1 - d / d.max()) ** 4).sum())
     assert light_weights(grid[:1], (5.0, 5.0, 5.0))[1].tolist() == [1.0]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# lodprt render / turntable (in process), on a cut bake with its hierarchy (the run time's view cut)
+
+
+@pytest.fixture(scope="module")
+def cut_store(bunny_floor, bunny_hierarchy, tmp_path_factory):
+    """The bunny on a 40 x 40 floor, light cut at 5 degrees, with the hierarchy (so the view cut is available)."""
+    from lodprt.bake import bake
+
+    path = tmp_path_factory.mktemp("render-cut") / "cut.zarr"
+    bake(bunny_floor, path, sh_order=4, device="cpu", tree=bunny_hierarchy, threshold_deg=5.0)
+    return path
+
+
+VIEW = ["--light", "0.05", "0.3", "0.1", "--eye", "0.05", "0.3", "0.45", "--target", "0", "0.1", "0", "--size", "160", "120"]
+
+
+def test_cli_render_png_npy_and_no_clobber(cut_store, tmp_path, capsys):
+    """`lodprt render` writes a tone-mapped PNG and a linear (H, W, 3) float32 .npy with background 0; it refuses to
+    replace an output without --overwrite and names a wrong suffix, each as a one-line error with exit code 2."""
+    from PIL import Image
+
+    from lodprt.cli import main
+
+    png, npy = tmp_path / "f.png", tmp_path / "f.npy"
+    assert main(["render", str(cut_store), *VIEW, "-o", str(png)]) == 0
+    assert "view cut" in capsys.readouterr().out
+    img = np.asarray(Image.open(png))
+    assert img.shape == (120, 160, 3) and img.max() > 100
+    assert main(["render", str(cut_store), *VIEW, "--full", "-o", str(npy)]) == 0
+    assert "full resolution" in capsys.readouterr().out
+    lin = np.load(npy)
+    assert lin.shape == (120, 160, 3) and lin.dtype == np.float32 and lin[0, 0].tolist() == [0, 0, 0] and lin.max() > 0
+    assert main(["render", str(cut_store), *VIEW, "-o", str(png)]) == 2
+    err = capsys.readouterr().err
+    assert "already exists" in err and str(png) in err and len(err.strip().splitlines()) == 1
+    assert main(["render", str(cut_store), *VIEW, "-o", str(png), "--overwrite"]) == 0
+    assert main(["render", str(cut_store), *VIEW, "-o", str(tmp_path / "f.jpg")]) == 2
+    assert ".png or .npy" in capsys.readouterr().err
+
+
+def test_cli_render_view_cut_differs_from_full(cut_store, tmp_path, capsys):
+    """The view cut draws fewer triangles than --full, and both frames show the same lit scene (mean within 25%)."""
+    from lodprt.cli import main
+
+    counts = {}
+    for name, extra in (("lod", []), ("full", ["--full"])):
+        assert main(["render", str(cut_store), *VIEW, *extra, "-o", str(tmp_path / f"{name}.npy")]) == 0
+        counts[name] = int(capsys.readouterr().out.split(": ")[1].split(" triangles")[0].replace(",", ""))
+    assert counts["lod"] < counts["full"]
+    lod, full = np.load(tmp_path / "lod.npy"), np.load(tmp_path / "full.npy")
+    assert abs(lod.mean() - full.mean()) < 0.25 * full.mean()
+
+
+def test_cli_turntable_sequence_and_gif(cut_store, tmp_path):
+    """`lodprt turntable` writes N PNG frames into a folder (the views differ) and an N-frame GIF."""
+    from PIL import Image
+
+    from lodprt.cli import main
+
+    view = ["--eye", "0.05", "0.3", "0.45", "--size", "80", "60", "--frames", "4"]
+    assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "seq")]) == 0
+    frames = sorted((tmp_path / "seq").glob("frame_*.png"))
+    assert [f.name for f in frames] == [f"frame_{k:04d}.png" for k in range(4)]
+    assert not np.array_equal(np.asarray(Image.open(frames[0])), np.asarray(Image.open(frames[2])))
+    assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "t.gif")]) == 0
+    assert Image.open(tmp_path / "t.gif").n_frames == 4
+    assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "seq")]) == 2  # not empty: no clobber

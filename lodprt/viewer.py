@@ -1,0 +1,330 @@
+"""Interactive viewer (``lodprt view``): moderngl-window (pyglet) around the same ``Renderer`` the offscreen
+commands use, driving the run time (moving lights, view-dependent cut) every frame something changed.
+
+Controls (also printed by H):
+
+    left drag          orbit the camera about its target        right / middle drag   pan
+    wheel              zoom (move the eye toward the target)    R                     reset the camera
+    shift + left drag  move the selected light in the screen plane; shift + wheel moves it toward/away from you
+    Tab                select the next light                    A / Delete            add / remove a light
+    [ / ]              error bound / 1.25, x 1.25               , / .                 alpha - / + 0.05
+    W wireframe        L LOD on/off                             V per-vertex / per-fragment radiance
+    M light markers    - / =  exposure - / + 1/2 stop            H help     Q / Escape quit
+
+The overlay (top left) shows triangles, vertices, error bound, alpha, lights and the frame time (run-time update
+and draw). Without a display it raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import time
+
+import numpy as np
+
+from lodprt.errors import LodprtError
+from lodprt.render import Renderer, _rotate_about, auto_white, frame_source
+
+log = logging.getLogger(__name__)
+
+HELP = __doc__.split("Controls (also printed by H):")[1].split("The overlay")[0].rstrip()
+
+_OVERLAY_VERTEX = """
+#version 330
+in vec2 in_pos;
+in vec2 in_uv;
+out vec2 v_uv;
+void main() { gl_Position = vec4(in_pos, 0.0, 1.0); v_uv = in_uv; }
+"""
+_OVERLAY_FRAGMENT = """
+#version 330
+uniform sampler2D text;
+in vec2 v_uv;
+out vec4 f_col;
+void main() { f_col = texture(text, v_uv); }
+"""
+
+
+def _check_display() -> None:
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise LodprtError("no display: DISPLAY is not set (run it on a desktop, over ssh -X, or under a virtual "
+                          "X server: xvfb-run -a lodprt view ...); offscreen pictures: lodprt render")
+    try:
+        import moderngl_window  # noqa: F401
+        import pyglet  # noqa: F401
+    except ImportError as exc:
+        raise LodprtError(f"the viewer needs moderngl-window and pyglet ({exc}); pip install moderngl-window") from exc
+
+
+class _Overlay:
+    """Text in the top-left corner: drawn with Pillow into a texture, blended over the frame."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.prog = ctx.program(vertex_shader=_OVERLAY_VERTEX, fragment_shader=_OVERLAY_FRAGMENT)
+        self.tex = None
+        self.vbo = ctx.buffer(reserve=4 * 4 * 4)
+        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f 2f", "in_pos", "in_uv")])
+        self.text = None
+
+    def draw(self, text: str, size: tuple[int, int]) -> None:
+        import moderngl
+        from PIL import Image, ImageDraw
+
+        if text != self.text or self.tex is None:
+            lines = text.split("\n")
+            w, h = 8 + 7 * max(len(s) for s in lines), 6 + 13 * len(lines)
+            img = Image.new("RGBA", (w, h), (0, 0, 0, 150))
+            ImageDraw.Draw(img).multiline_text((4, 3), text, fill=(255, 255, 255, 255), spacing=2)
+            if self.tex is not None:
+                self.tex.release()
+            self.tex = self.ctx.texture((w, h), 4, img.transpose(Image.FLIP_TOP_BOTTOM).tobytes())
+            self.tex.filter = (moderngl.NEAREST, moderngl.NEAREST)  # one texel per pixel: crisp text
+            self.text = text
+        w, h = self.tex.size
+        x1, y0 = -1 + 2 * w / size[0], 1 - 2 * h / size[1]
+        self.vbo.write(np.array([-1, y0, 0, 0, x1, y0, 1, 0, -1, 1, 0, 1, x1, 1, 1, 1], np.float32).tobytes())
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        self.tex.use(0)
+        self.prog["text"].value = 0
+        self.vao.render(moderngl.TRIANGLE_STRIP)
+        self.ctx.disable(moderngl.BLEND)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+
+
+@dataclasses.dataclass
+class ViewerState:
+    """What the controls change; kept apart from the window so it can be driven (and tested) without one."""
+
+    camera: object
+    lights: np.ndarray
+    colors: np.ndarray | None
+    error_bound: float
+    alpha: float
+    lod: bool = True
+    wireframe: bool = False
+    per_vertex: bool = False
+    markers: bool = True
+    exposure: float = 0.0
+    selected: int = 0
+    dirty: bool = True  # the run time must make a new frame
+
+    def orbit(self, dx: float, dy: float) -> None:
+        """Turn the eye about the target: dx radians about up, dy radians about the camera's right axis."""
+        cam = self.camera
+        eye = _rotate_about(cam.eye, cam.target, cam.up, -dx)
+        f = np.subtract(cam.target, eye)
+        right = np.cross(f, cam.up)
+        new = _rotate_about(eye, cam.target, right, -dy)
+        v = new - np.asarray(cam.target)
+        if abs(np.dot(v / np.linalg.norm(v), np.asarray(cam.up) / np.linalg.norm(cam.up))) < 0.995:  # stay off the pole
+            eye = new
+        self._camera(eye=tuple(eye))
+
+    def pan(self, dx: float, dy: float) -> None:
+        """Move eye and target together by (dx, dy) in units of the distance between them, in the screen plane."""
+        cam = self.camera
+        f = np.subtract(cam.target, cam.eye)
+        dist = np.linalg.norm(f)
+        right = np.cross(f, cam.up)
+        right /= np.linalg.norm(right)
+        up = np.cross(right, f / dist)
+        shift = dist * (-dx * right + dy * up)
+        self._camera(eye=tuple(np.add(cam.eye, shift)), target=tuple(np.add(cam.target, shift)))
+
+    def zoom(self, factor: float) -> None:
+        cam = self.camera
+        v = np.subtract(cam.eye, cam.target)
+        self._camera(eye=tuple(np.asarray(cam.target) + v * factor))
+
+    def move_light(self, dx: float, dy: float, dz: float = 0.0) -> None:
+        """Move the selected light by (dx, dy) screen-plane and dz toward-the-eye units of the eye distance."""
+        cam = self.camera
+        f = np.subtract(cam.target, cam.eye)
+        f /= np.linalg.norm(f)
+        right = np.cross(f, cam.up)
+        right /= np.linalg.norm(right)
+        up = np.cross(right, f)
+        d = np.linalg.norm(self.lights[self.selected] - np.asarray(cam.eye))
+        self.lights[self.selected] += d * (dx * right + dy * up - dz * f)
+        self.dirty = True
+
+    def add_light(self) -> None:
+        base = self.lights[self.selected]
+        self.lights = np.vstack([self.lights, base + 0.05 * np.linalg.norm(base - np.asarray(self.camera.target)) * np.array([1.0, 0.0, 0.0])])
+        if self.colors is not None:
+            self.colors = np.vstack([self.colors, self.colors[self.selected]])
+        self.selected = len(self.lights) - 1
+        self.dirty = True
+
+    def remove_light(self) -> None:
+        if len(self.lights) > 1:
+            self.lights = np.delete(self.lights, self.selected, axis=0)
+            if self.colors is not None:
+                self.colors = np.delete(self.colors, self.selected, axis=0)
+            self.selected %= len(self.lights)
+            self.dirty = True
+
+    def resize(self, width: int, height: int) -> None:
+        self._camera(width=max(int(width), 1), height=max(int(height), 1))
+
+    def _camera(self, **fields) -> None:
+        self.camera = dataclasses.replace(self.camera, **fields)
+        self.dirty = True
+
+
+class Viewer:
+    """The window loop: events change a ``ViewerState``; a changed state asks the run time for a new frame."""
+
+    def __init__(self, store, *, lights, camera, colors=None, error_bound: float = 0.25, alpha: float = 0.6,
+                 lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
+                 white: float | None = None, light_markers: bool = True):
+        _check_display()
+        import moderngl_window
+        from moderngl_window.conf import settings
+
+        self.state = ViewerState(camera=camera, lights=np.asarray(lights, np.float64).reshape(-1, 3).copy(),
+                                 colors=None if colors is None else np.asarray(colors, np.float64).reshape(-1, 3),
+                                 error_bound=error_bound, alpha=alpha, lod=lod, wireframe=wireframe,
+                                 per_vertex=per_vertex, markers=light_markers, exposure=exposure)
+        self.home = camera
+        self.white = white
+        settings.WINDOW.update({"class": "moderngl_window.context.pyglet.Window", "gl_version": (3, 3),
+                                "size": (camera.width, camera.height), "title": f"lodprt view {store.path.name}",
+                                "vsync": False, "resizable": True, "aspect_ratio": None})
+        try:
+            self.window = moderngl_window.create_window_from_settings()
+        except Exception as exc:  # no X server behind DISPLAY, no GLX, no OpenGL 3.3
+            raise LodprtError(f"cannot open a window on DISPLAY={os.environ.get('DISPLAY')!r}: {exc}") from exc
+        self.source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod)  # after the window: fail fast
+        w = self.window
+        self.renderer = Renderer(w.ctx)
+        self.overlay = _Overlay(w.ctx)
+        self.frame = None
+        self.ms_update = self.ms_draw = 0.0
+        w.mouse_drag_event_func = self._drag
+        w.mouse_scroll_event_func = self._scroll
+        w.key_event_func = self._key
+        w.resize_func = lambda width, height: self.state.resize(*self.window.buffer_size)
+        self.state.resize(*w.buffer_size)
+
+    # -- events ----------------------------------------------------------------------------------------------
+    def _drag(self, x, y, dx, dy):
+        s, w = self.state, self.window
+        scale = 1.0 / max(w.size[1], 1)
+        if w.modifiers.shift:
+            s.move_light(dx * scale, -dy * scale)
+        elif w.mouse_states.left:
+            s.orbit(dx * 3 * scale, dy * 3 * scale)
+        else:
+            s.pan(dx * scale, dy * scale)
+
+    def _scroll(self, x_offset, y_offset):
+        if self.window.modifiers.shift:
+            self.state.move_light(0.0, 0.0, 0.05 * y_offset)
+        else:
+            self.state.zoom(0.9 ** y_offset)
+
+    def _key(self, key, action, modifiers):
+        keys, s = self.window.keys, self.state
+        if action != keys.ACTION_PRESS:
+            return
+        if key in (keys.Q, keys.ESCAPE):
+            self.window.close()
+        elif key == keys.TAB:
+            s.selected = (s.selected + 1) % len(s.lights)
+        elif key == keys.A:
+            s.add_light()
+        elif key in (keys.DELETE, keys.BACKSPACE):
+            s.remove_light()
+        elif key in (keys.LEFT_BRACKET, keys.RIGHT_BRACKET):
+            s.error_bound = s.error_bound / 1.25 if key == keys.LEFT_BRACKET else s.error_bound * 1.25
+            s.dirty = True
+        elif key in (keys.COMMA, keys.PERIOD):
+            s.alpha = float(np.clip(s.alpha + (0.05 if key == keys.PERIOD else -0.05), 0.0, 1.0))
+            s.dirty = True
+        elif key == keys.W:
+            s.wireframe = not s.wireframe
+        elif key == keys.L:
+            s.lod = not s.lod
+            self.source.set_lod(s.lod)
+            s.dirty = True
+        elif key == keys.V:
+            s.per_vertex = not s.per_vertex
+        elif key == keys.M:
+            s.markers = not s.markers
+        elif key in (keys.MINUS, keys.EQUAL):
+            s.exposure += 0.5 if key == keys.EQUAL else -0.5
+        elif key == keys.R:
+            s.camera = dataclasses.replace(self.home, width=s.camera.width, height=s.camera.height)
+            s.dirty = True
+        elif key == keys.H:
+            print(HELP)
+
+    # -- loop ------------------------------------------------------------------------------------------------
+    def step(self) -> None:
+        """One frame: a new run-time frame if the state changed, then draw it and the overlay."""
+        s = self.state
+        if s.dirty or self.frame is None:
+            t0 = time.perf_counter()
+            self.source.set_error_bound(s.error_bound, s.alpha)
+            self.source.set_lights(s.lights, s.colors)
+            self.source.set_camera(s.camera)
+            self.frame = self.source.update()
+            s.lights = np.asarray(self.frame.lights, np.float64).copy()  # as the run time clamped them
+            self.ms_update = 1e3 * (time.perf_counter() - t0)
+            s.dirty = False
+        t0 = time.perf_counter()
+        white = self.white or getattr(self.source, "white", None) or auto_white(self.frame.radiance)
+        w = self.window
+        info = self.renderer.draw(self.frame, target=w.fbo, camera=s.camera, per_vertex=s.per_vertex,
+                                  exposure=s.exposure, white=white, wireframe=s.wireframe, light_markers=s.markers)
+        st = self.frame.stats
+        text = (f"{info['triangles']:,} triangles, {len(self.frame.positions):,} vertices, "
+                f"{'LOD' if getattr(self.source, 'lod', False) else 'full resolution'}\n"
+                f"error bound {s.error_bound:.4g}  alpha {s.alpha:.2f}  exposure {s.exposure:+.1f}\n"
+                f"light {s.selected + 1} of {len(s.lights)} at ({', '.join(f'{x:.3f}' for x in s.lights[s.selected])})\n"
+                f"update {self.ms_update:.0f} ms (cut {st.get('ms_cut', 0.0):.0f}), draw {self.ms_draw:.0f} ms  [H help]")
+        self.overlay.draw(text, w.buffer_size)
+        self.ms_draw = 1e3 * (time.perf_counter() - t0)
+        if info["gl_error"] != "GL_NO_ERROR":
+            log.warning("OpenGL error: %s", info["gl_error"])
+
+    def screenshot(self, path) -> None:
+        """The window's current picture (after ``step``) as a PNG."""
+        from PIL import Image
+
+        w, h = self.window.buffer_size
+        img = np.frombuffer(self.window.fbo.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
+        Image.fromarray(img).save(path)
+
+    def run(self, frames: int | None = None, *, screenshot=None) -> int:
+        """Loop until the window closes (or after ``frames`` frames); returns the number of frames drawn.
+        ``screenshot``: write the last frame drawn there (PNG)."""
+        n = 0
+        w = self.window
+        try:
+            while not w.is_closing and (frames is None or n < frames):
+                w.use()
+                self.step()
+                if screenshot is not None and (frames is None or n == frames - 1):
+                    self.screenshot(screenshot)
+                w.swap_buffers()
+                n += 1
+        finally:
+            self.renderer.release()
+            w.destroy()
+        return n
+
+
+def run_viewer(store, *, frames: int | None = None, screenshot=None, **options) -> int:
+    """``lodprt view``: open the window, loop, return the exit status (LodprtError when no display)."""
+    viewer = Viewer(store, **options)
+    print(f"lodprt view: {store.path} - H prints the controls, Q quits")
+    n = viewer.run(frames, screenshot=screenshot)
+    print(f"lodprt view: closed after {n} frames")
+    return 0
