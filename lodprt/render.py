@@ -152,7 +152,6 @@ def _sh_glsl(order: int) -> str:
 
 _FRAME_COMMON = """
 #version 330
-#define NCOEF {ncoef}
 uniform sampler2D coef;      // (V * NCOEF) RGB32F texels, texel v * NCOEF + i = coefficient i of vertex v
 uniform int tex_width;
 uniform vec3 eye;
@@ -182,10 +181,16 @@ in vec3 in_nrm;
 out vec3 v_pos;
 out vec3 v_rad;
 flat out int v_id;
+#ifdef COEF_VARYINGS
+out VertexCoef { vec3 c[NCOEF]; } vs_c;  // fetched once per vertex, interpolated by the rasteriser
+#endif
 void main() {
     gl_Position = mvp * vec4(in_pos, 1.0);
     v_pos = in_pos;
     v_id = gl_VertexID;
+#ifdef COEF_VARYINGS
+    for (int i = 0; i < NCOEF; ++i) vs_c.c[i] = coef_at(gl_VertexID, i);
+#endif
 #ifdef PER_VERTEX
     v_rad = radiance(ivec3(gl_VertexID), vec3(1.0, 0.0, 0.0), view_dir(in_pos, in_nrm));
 #else
@@ -195,7 +200,6 @@ void main() {
 """
 
 _FRAME_GEOMETRY = """
-#version 330
 layout(triangles) in;
 layout(triangle_strip, max_vertices = 3) out;
 in vec3 v_pos[];
@@ -205,8 +209,15 @@ out vec3 g_pos;
 out vec3 g_rad;
 out vec3 g_bary;
 flat out ivec3 g_ids;
+#ifdef COEF_VARYINGS
+in VertexCoef { vec3 c[NCOEF]; } gs_in[];
+out FragmentCoef { vec3 c[NCOEF]; } gs_c;
+#endif
 void main() {
     for (int k = 0; k < 3; ++k) {
+#ifdef COEF_VARYINGS
+        for (int i = 0; i < NCOEF; ++i) gs_c.c[i] = gs_in[k].c[i];
+#endif
         gl_Position = gl_in[k].gl_Position;
         g_pos = v_pos[k];
         g_rad = v_rad[k];
@@ -227,11 +238,20 @@ in vec3 g_pos;
 in vec3 g_rad;
 in vec3 g_bary;
 flat in ivec3 g_ids;
+#ifdef COEF_VARYINGS
+in FragmentCoef { vec3 c[NCOEF]; } fs_c;
+#endif
 out vec4 f_col;
 vec3 srgb(vec3 x) { return mix(12.92 * x, 1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, x)); }
 void main() {
-#ifdef PER_VERTEX
+#if defined(PER_VERTEX)
     vec3 L = g_rad;
+#elif defined(COEF_VARYINGS)
+    vec3 d = view_dir(g_pos, normalize(g_rad));
+    float y[NCOEF];
+    sh_basis(d, y);
+    vec3 L = vec3(0.0);
+    for (int i = 0; i < NCOEF; ++i) L += fs_c.c[i] * y[i];  // interpolated coefficients at this view direction
 #else
     vec3 d = view_dir(g_pos, normalize(g_rad));
     vec3 L = radiance(g_ids, g_bary, d);  // interpolated coefficients, evaluated at this fragment's view direction
@@ -334,10 +354,17 @@ class Renderer:
                 raise LodprtError(f"frame coefficients: {ncoef} per channel; the renderer needs a square number "
                                   f"of at most {_MAX_ORDER * _MAX_ORDER} (SH order 1..{_MAX_ORDER})")
             common = _FRAME_COMMON.format(ncoef=ncoef, sh=_sh_glsl(order))
+            defines = f"#version 330\n#define NCOEF {ncoef}\n"
+            info = self.ctx.info
+            limit = min(int(info.get(k, 64)) for k in ("GL_MAX_GEOMETRY_OUTPUT_COMPONENTS",
+                                                       "GL_MAX_FRAGMENT_INPUT_COMPONENTS"))
             if per_vertex:
-                common = common.replace("#define NCOEF", "#define PER_VERTEX\n#define NCOEF", 1)
+                defines += "#define PER_VERTEX\n"
+            elif 4 * (ncoef + 4) <= min(limit, 4 * int(info.get("GL_MAX_VARYING_VECTORS", 15))):
+                defines += "#define COEF_VARYINGS\n"  # coefficients fit the varyings (order <= 5 on llvmpipe)
+            common = common.replace("#version 330\n", defines, 1)
             self._programs[key] = self.ctx.program(vertex_shader=common + _FRAME_VERTEX,
-                                                   geometry_shader=_FRAME_GEOMETRY,
+                                                   geometry_shader=defines + _FRAME_GEOMETRY,
                                                    fragment_shader=common + _FRAME_FRAGMENT)
         return self._programs[key]
 
