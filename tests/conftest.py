@@ -40,3 +40,13 @@ def bunny_hierarchy(bunny_floor):
     from lodprt.hierarchy import build_hierarchy
 
     return build_hierarchy(bunny_floor.positions, bunny_floor.faces, bunny_floor.normals)
+
+
+@pytest.fixture(scope="session")
+def bunny_bake(bunny_floor, bunny_hierarchy, tmp_path_factory):
+    """A light-cut bake (30 degrees, SH order 4, 3 x 1 x 3 lights) of ``bunny_floor``: the store's path."""
+    from lodprt.bake import bake
+
+    path = tmp_path_factory.mktemp("bunny-bake") / "bunny.zarr"
+    bake(bunny_floor, path, sh_order=4, device="cpu", threshold_deg=30.0, tree=bunny_hierarchy)
+    return path

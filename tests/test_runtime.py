@@ -1,0 +1,261 @@
+"""Run time (SPEC 5): light interpolation on a bake, the view-dependent cut, incremental refinement, relighting."""
+
+import numpy as np
+import pytest
+
+from lodprt import sh
+from lodprt.errors import LodprtError
+from lodprt.hierarchy import active_ancestors, dependency_violations
+from lodprt.runtime import Camera, Runtime, clip_planes, view_projection
+from lodprt.store import open_store
+
+
+@pytest.fixture(scope="module")
+def store(bunny_bake):
+    return open_store(bunny_bake)
+
+
+@pytest.fixture(scope="module")
+def rt(store):
+    return Runtime(store, device="cpu")
+
+
+def centre_and_size(rt):
+    c = 0.5 * (rt.bounds[0] + rt.bounds[1])
+    return c, float((rt.bounds[1] - rt.bounds[0]).max())
+
+
+def orbit_camera(rt, angle, *, dist=0.9, height=0.45, **kw):
+    c, ext = centre_and_size(rt)
+    eye = c + ext * np.array([dist * np.sin(angle), height, dist * np.cos(angle)])
+    return Camera(eye=tuple(eye), target=tuple(c), **{"width": 320, "height": 240, **kw})
+
+
+def assert_legal(rt):
+    cut = rt.cut
+    np.testing.assert_array_equal(cut.anc, active_ancestors(rt.h, cut.active))  # a front
+    assert len(dependency_violations(rt.h, rt.faces, cut.anc)) == 0
+
+
+def converge(rt, camera, lights=None):
+    rt.set_camera(camera)
+    if lights is not None:
+        rt.set_lights(lights)
+    return rt.update(max_passes=10_000)
+
+
+def test_light_on_sample_reproduces_the_stored_sample(store, rt):
+    """A light exactly on sample k gives sample k's completed coefficients times the light's intensity."""
+    for k in (0, 4, store.num_samples - 1):
+        rt.set_lights(store.light_positions[k], colors=[(0.5, 1.0, 2.0)])
+        got = rt.coefficients()
+        want = store.coefficients(k)[:, :1] * np.array([0.5, 1.0, 2.0])[None, :, None]
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+
+
+def test_radiance_continuous_across_a_cell_boundary(store, rt):
+    """Radiance changes by a small amount for a small light step through the middle between two samples."""
+    a, b = store.light_positions[3], store.light_positions[4]
+    eye = (0.0, 0.4, 0.9)
+    mid = 0.5 * (a + b)
+    step = 1e-4 * np.linalg.norm(b - a)
+    rad = []
+    for s in (-step, 0.0, step):
+        rt.set_lights(mid + s * (b - a) / np.linalg.norm(b - a) + np.array([0.0, 0.0, 1e-3]))
+        rad.append(rt.radiance(eye))
+    scale = np.abs(rad[1]).max()
+    assert np.abs(rad[0] - rad[1]).max() < 1e-2 * scale
+    assert np.abs(rad[2] - rad[1]).max() < 1e-2 * scale
+
+
+def test_two_lights_at_one_spot_add(store, rt):
+    """Two lights at the same place equal one light of twice the intensity; several lights add (thesis 3.4.1)."""
+    x = 0.3 * store.light_positions[1] + 0.7 * store.light_positions[5]
+    rt.set_lights([x, x])
+    two = rt.coefficients()
+    rt.set_lights([x], colors=[2.0 * store.intensity])
+    np.testing.assert_allclose(two, rt.coefficients(), rtol=1e-6, atol=1e-7)
+    y = store.light_positions[7]
+    rt.set_lights([x, y])
+    both = rt.coefficients()
+    rt.set_lights([x])
+    one = rt.coefficients()
+    rt.set_lights([y])
+    np.testing.assert_allclose(both, one + rt.coefficients(), rtol=1e-5, atol=1e-6)
+
+
+def test_lights_outside_the_region(store):
+    """Outside the light box: clamped with lights_clamped counted, or refused with outside='error'."""
+    r = Runtime(store, outside="clamp")
+    hi = np.asarray(store.root["lights"].attrs["box"])[3:]
+    r.set_lights([hi + 1.0])
+    assert r.lights_clamped == 1
+    np.testing.assert_allclose(r.light_positions[0], hi)
+    r2 = Runtime(store, outside="error")
+    with pytest.raises(LodprtError, match="outside the sampled region"):
+        r2.set_lights([hi + 1.0])
+    r2.set_lights([hi])  # on the boundary is inside
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_kernel_errors_match_float64_reference(rt, device, seed):
+    """view_errors (float32 Warp kernel) agrees with the float64 numpy reference on every internal node."""
+    r = Runtime(rt.store, device=device)
+    rng = np.random.default_rng(seed)
+    box = np.asarray(r.store.root["lights"].attrs["box"])
+    r.set_camera(orbit_camera(r, rng.uniform(0, 6.28), fov=rng.uniform(20, 90)))
+    r.set_lights(box[:3] + rng.random((2, 3)) * (box[3:] - box[:3]), colors=rng.random((2, 3)))
+    nodes = np.arange(r.h.num_vertices, r.h.num_nodes)
+    c1, e1, g1, l1 = r.node_errors(nodes)
+    c2, e2, g2, l2 = r.node_errors_reference(nodes)
+    assert (c1 != c2).mean() < 1e-4  # float32 ties at a plane or a cone boundary only
+    ok = c1 == c2
+    np.testing.assert_allclose(g1[ok], g2[ok], atol=2e-5)
+    np.testing.assert_allclose(l1[ok], l2[ok], atol=2e-4)
+    np.testing.assert_allclose(e1[ok], e2[ok], atol=2e-4)
+
+
+def test_frame_relighting_matches_reference(rt, device):
+    """A frame's coefficients and radiance equal the float64 evaluation at the frame's vertices."""
+    r = Runtime(rt.store, device=device)
+    r.set_lights([r.store.light_positions[2] * 0.5 + r.store.light_positions[6] * 0.5])
+    f = converge(r, orbit_camera(r, 0.7))
+    ref = r.coefficients(f.vertex_ids)
+    np.testing.assert_allclose(f.coefficients, ref, rtol=1e-5, atol=1e-5 * np.abs(ref).max())
+    eye = np.asarray(f.camera.eye)
+    d = eye - r.positions[f.vertex_ids]
+    rad = np.einsum("vci,vi->vc", ref.astype(np.float64), sh.basis(d, r.order))
+    np.testing.assert_allclose(f.radiance, rad, rtol=1e-4, atol=1e-5 * np.abs(rad).max())
+    assert f.triangles.min() >= 0 and f.triangles.max() < len(f.vertex_ids)
+    np.testing.assert_array_equal(f.positions, r.positions[f.vertex_ids].astype(np.float32))
+
+
+def test_cut_is_legal_after_every_update(store):
+    """Along an orbit with a moving light the cut stays a legal front after every frame (and is incremental)."""
+    r = Runtime(store)
+    box = np.asarray(store.root["lights"].attrs["box"])
+    touched = []
+    for i in range(12):
+        r.set_camera(orbit_camera(r, 0.02 * i))  # small steps: frame-to-frame coherence
+        t = 0.05 * i
+        r.set_lights([box[:3] + (box[3:] - box[:3]) * np.array([0.5 + 0.4 * np.cos(t), 0.5, 0.5 + 0.4 * np.sin(t)])])
+        f = r.update()
+        assert_legal(r)
+        assert f.stats["triangles"] < len(store.faces)
+        touched.append(f.stats["nodes_touched"])
+    assert touched[0] > 5 * np.median(touched[1:])  # later frames touch what changed, not the whole cut
+
+
+def test_zero_error_bound_refines_everything_visible(store):
+    """With error bound 0 every active internal node is culled or has zero error (to float32 rounding): the visible
+    mesh is at full resolution."""
+    r = Runtime(store, error_bound=0.0)
+    converge(r, orbit_camera(r, 0.3, dist=1.2, height=0.8))
+    assert_legal(r)
+    act = np.flatnonzero(r.cut.active)
+    internal = act[act >= r.h.num_vertices]
+    culled, err, _, _ = r.node_errors_reference(internal)
+    assert (culled | (err < 1e-9)).all()
+    big = Runtime(store, error_bound=1.0)  # bound at the top of the error scale: nothing needs refining
+    f = converge(big, orbit_camera(big, 0.3, dist=1.2, height=0.8))
+    assert f.stats["refined"] == 0 and f.stats["active_nodes"] == len(r.h.roots)
+
+
+def test_camera_looking_away_gives_the_coarsest_cut(store):
+    """When nothing is in view, a detailed cut coarsens back to the base mesh (the coarsest legal cut)."""
+    r = Runtime(store, error_bound=0.05)
+    cam = orbit_camera(r, 0.0)
+    f = converge(r, cam)
+    assert f.stats["active_nodes"] > 2 * len(r.h.roots)
+    eye = np.asarray(cam.eye)
+    away = Camera(eye=cam.eye, target=tuple(eye + (eye - np.asarray(cam.target))), width=320, height=240)
+    converge(r, away)
+    assert_legal(r)
+    np.testing.assert_array_equal(np.flatnonzero(r.cut.active), np.sort(r.h.roots))
+
+
+def test_incremental_equals_from_scratch(store):
+    """Reaching a view incrementally from another view gives the same cut as converging on it from the base."""
+    lights = [store.light_positions[4] + np.array([0.01, 0.0, -0.02])]
+    inc = Runtime(store, error_bound=0.1)
+    converge(inc, orbit_camera(inc, 2.0), lights)
+    converge(inc, orbit_camera(inc, 0.5), lights)
+    fresh = Runtime(store, error_bound=0.1)
+    converge(fresh, orbit_camera(fresh, 0.5), lights)
+    a, b = np.flatnonzero(inc.cut.active), np.flatnonzero(fresh.cut.active)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_culling_is_conservative(store):
+    """Every node culled as outside the frustum has all its leaves outside; every back-facing one has all its
+    leaves' normals facing away from the eye."""
+    r = Runtime(store)
+    r.set_camera(orbit_camera(r, 1.1, dist=0.5, height=0.3, fov=30))
+    nodes = np.arange(r.h.num_vertices, r.h.num_nodes)
+    culled, _, _, _ = r.node_errors_reference(nodes)
+    planes = clip_planes(view_projection(r.camera, r.bounds))
+    eye = np.asarray(r.camera.eye)
+    rng = np.random.default_rng(3)
+    for k in rng.choice(nodes[culled], 300, replace=False):
+        leaves = r.h.leaves(k)
+        p = r.positions[leaves]
+        inside = (p @ planes[:, :3].T + planes[:, 3] >= 0).all(1)
+        facing = ((eye - p) * r.normals[leaves]).sum(1) > 0
+        assert not (inside & facing).any(), k
+
+
+def test_lumi_error_bounds_the_leaf_spread(store):
+    """e_lumi * white is at least the true max - min of the leaves' radiance toward the node's view direction."""
+    r = Runtime(store, white=1.0)
+    r.set_camera(orbit_camera(r, 0.4))
+    r.set_lights([store.light_positions[1] * 0.6 + store.light_positions[4] * 0.4])
+    nodes = np.random.default_rng(1).choice(np.arange(r.h.num_vertices, r.h.num_nodes), 400, replace=False)
+    _, _, _, lumi = r.node_errors_reference(nodes)
+    coef = r.coefficients()
+    for k, e in zip(nodes, lumi):
+        v = np.asarray(r.camera.eye) - r.positions[r.h.vertex[k]]
+        rad = np.einsum("vci,i->vc", coef[r.h.leaves(k)].astype(np.float64), sh.basis(v, r.order))
+        spread = float((rad.max(0) - rad.min(0)).max())
+        assert e >= min(spread, 1.0) - 1e-3 * max(spread, 1e-3), (k, e, spread)
+
+
+@pytest.mark.parametrize("cam", [
+    dict(fov=0.01), dict(fov=179.0), dict(near=1e-9), dict(dist=0.01, height=0.05),
+])
+def test_stiff_cameras_stay_finite_and_legal(store, cam):
+    """Fov near 0 and 179 degrees, a near plane almost 0, a camera inside the scene: finite frames, legal cuts."""
+    r = Runtime(store)
+    kw = {k: v for k, v in cam.items() if k in ("fov", "near")}
+    geo = {k: v for k, v in cam.items() if k in ("dist", "height")}
+    f = converge(r, orbit_camera(r, 0.9, **geo, **kw))
+    assert np.isfinite(f.radiance).all() and np.isfinite(f.coefficients).all()
+    assert_legal(r)
+
+
+def test_triangle_budget_steers_the_count(store):
+    """With a triangle budget the count settles at or under the budget within a few frames."""
+    r = Runtime(store, error_bound=0.01, triangle_budget=3000)
+    cam = orbit_camera(r, 0.2)
+    counts = []
+    for _ in range(40):
+        r.set_camera(cam)
+        counts.append(r.update().stats["triangles"])
+    assert counts[0] > 3000 and counts[-1] <= 3000
+
+
+def test_bad_settings_are_refused(store, rt):
+    """Bad error bounds, alpha, cameras, lights and colours raise LodprtError naming the field."""
+    with pytest.raises(LodprtError, match="alpha"):
+        rt.set_error_bound(0.2, alpha=1.5)
+    with pytest.raises(LodprtError, match="error_bound"):
+        rt.set_error_bound(-1)
+    with pytest.raises(LodprtError, match="fov"):
+        Camera(eye=(0, 0, 1), target=(0, 0, 0), fov=180)
+    with pytest.raises(LodprtError, match="eye"):
+        Camera(eye=(0, np.nan, 1), target=(0, 0, 0))
+    with pytest.raises(LodprtError, match="lights"):
+        rt.set_lights(np.zeros((2, 2)))
+    with pytest.raises(LodprtError, match="colors"):
+        rt.set_lights([[0, 0.3, 0]], colors=[[-1, 0, 0]])
+    with pytest.raises(LodprtError, match="no camera"):
+        Runtime(store).update()
