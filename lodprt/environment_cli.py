@@ -6,7 +6,6 @@ in :mod:`lodprt.environment`, :mod:`lodprt.irradiance`, :mod:`lodprt.transfer` a
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -50,6 +49,9 @@ def add_parsers(sub) -> None:
     be.add_argument("--rotate-rays", action="store_true", help="turn the ray set by a random rotation per vertex")
     be.add_argument("--no-glossy", action="store_true", help="skip the glossy matrices")
     be.add_argument("--glossy-order", type=int, default=None, metavar="N", help="bands of the glossy transferred radiance (default: --sh-order)")
+    be.add_argument("--lod-threshold", type=float, default=None, metavar="E",
+                    help="level of detail: build the vertex hierarchy and store transfer vectors only where they differ "
+                    "by more than E (relative) across a node's leaves; the rest are completed on reading (T-15)")
     be.add_argument("--device", default=None, metavar="DEV", help="Warp device: cpu, cuda, cuda:N")
     be.add_argument("--overwrite", action="store_true", help="replace OUT if it is an existing transfer store")
 
@@ -126,14 +128,16 @@ def _cmd_bake_environment(args) -> int:
         res = bake_transfer(scene, args.out, order=args.sh_order, mode=args.transfer, rays=args.rays,
                             bounces=args.bounces, threshold=args.bounce_threshold, glossy=not args.no_glossy,
                             glossy_order=args.glossy_order, rotate=args.rotate_rays, environment=env, device=device,
-                            overwrite=args.overwrite, progress=progress)
+                            lod_threshold=args.lod_threshold, overwrite=args.overwrite, progress=progress)
     finally:
         if bar is not None:
             bar.close()
     e = res.diffuse.energy
     print(f"wrote {res.path}: order {args.sh_order} {args.transfer} transfer, {args.rays} rays/vertex, "
           f"{len(e) - 1} bounce pass(es) (energy " + ", ".join(f"{x:.3g}" for x in e) + f"), "
-          f"{len(res.glossy_ids):,} glossy matrices; bake {res.seconds:.2f} s on {res.device} "
+          f"{len(res.glossy_ids):,} glossy matrices; "
+          + (f"LOD keeps {len(res.cut_nodes):,} of {scene.num_vertices:,} vertices; " if res.cut_nodes is not None else "")
+          + f"bake {res.seconds:.2f} s on {res.device} "
           f"(+{res.load_seconds:.2f} s kernel load)")
     return 0
 

@@ -69,8 +69,7 @@ def relit_radiance(store, lighting, eye=None) -> np.ndarray:
 
     The glossy term is added where the store holds matrices (needs ``eye``); vertices no face uses stay 0.
     """
-    t = store.read("transfer/diffuse")
-    rad = diffuse_radiance(t, lighting)
+    rad = diffuse_radiance(store.diffuse(), lighting)
     ids = store.read("transfer/glossy_vertex_ids")
     if len(ids) and eye is not None and store.has("transfer/glossy"):
         mid = store.read("scene/material_id")[ids]

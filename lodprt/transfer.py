@@ -302,11 +302,65 @@ def closest_hits(geom: Geometry, origins, directions) -> tuple[np.ndarray, np.nd
     return face.numpy(), bary.numpy()
 
 
+# -- level of detail: keep vertices where transfer vectors differ (thesis 3.3 with transfer in place of the light) --
+
+
+def transfer_cut(h, transfer, threshold: float, *, floor_fraction: float = 0.05) -> np.ndarray:
+    """Bottom-up cut of the vertex hierarchy ``h`` for transfer vectors: (K,) int32 active nodes (a front).
+
+    A node replaces its two children when both did so all the way down and every leaf below it has a transfer
+    vector within ``threshold`` (relative) of the node vertex's own: ``max_leaf |T_leaf - T_v| <= threshold
+    (|T_v| + floor)``, with ``floor = floor_fraction`` x the mean |T| (dark vertices collapse on an absolute
+    scale rather than never). The leaf spread is bounded conservatively by the per-coefficient box of the leaves'
+    vectors, built bottom-up a height level at a time. ``threshold`` 0 collapses only identical vectors.
+    """
+    from lodprt.hierarchy import node_heights
+
+    if not np.isfinite(threshold) or threshold < 0:
+        raise LodprtError(f"lod threshold {threshold!r}: must be finite and >= 0")
+    V, N = h.num_vertices, h.num_nodes
+    t = np.asarray(transfer, np.float64).reshape(V, -1)
+    norms = np.linalg.norm(t, axis=1)
+    floor = floor_fraction * float(norms[norms > 0].mean()) if (norms > 0).any() else 0.0
+    lo = np.empty((N, t.shape[1]))
+    hi = np.empty((N, t.shape[1]))
+    lo[:V] = hi[:V] = t
+    ok = np.zeros(N, bool)
+    ok[:V] = True
+    hk = node_heights(h)
+    order = np.argsort(hk, kind="stable")
+    bounds = np.searchsorted(hk[order], np.arange(1, hk.max(initial=0) + 2))
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        nodes = order[a:b]
+        c0, c1 = h.children[nodes, 0], h.children[nodes, 1]
+        lo[nodes] = np.minimum(lo[c0], lo[c1])
+        hi[nodes] = np.maximum(hi[c0], hi[c1])
+        tv = t[h.vertex[nodes]]
+        spread = np.linalg.norm(np.maximum(hi[nodes] - tv, tv - lo[nodes]), axis=1)
+        ok[nodes] = ok[c0] & ok[c1] & (spread <= threshold * (np.linalg.norm(tv, axis=1) + floor))
+    parent_ok = np.where(h.parent >= 0, ok[np.maximum(h.parent, 0)], False)
+    return np.flatnonzero(ok & ~parent_ok).astype(np.int32)
+
+
+def complete_transfer(h, positions, normals, cut_nodes, coefficients) -> np.ndarray:
+    """Transfer vectors of every vertex from those of a cut's vertices (T-15 completion, ``lodprt.completion``):
+    cut_nodes (K,), coefficients (K, ...) at ``h.vertex[cut_nodes]`` -> (V, ...) float64."""
+    from lodprt.completion import CompletionPlan
+
+    cut_nodes = np.asarray(cut_nodes)
+    plan = CompletionPlan(h, positions, normals)
+    return plan.complete(h.vertex[cut_nodes], np.asarray(coefficients), h.num_vertices, cut_nodes=cut_nodes,
+                         dark=np.zeros(len(cut_nodes), bool))
+
+
 # -- bake and store ---------------------------------------------------------------------------------------------
 
 
 @dataclasses.dataclass
 class TransferBake:
+    """What :func:`bake_transfer` made: ``diffuse`` (every vertex), glossy ``(ids, matrices)``, and with LOD the
+    hierarchy ``tree`` and the ``cut_nodes`` whose vertices the store keeps."""
+
     path: Path | None
     diffuse: DiffuseTransfer
     glossy_ids: np.ndarray
@@ -314,17 +368,22 @@ class TransferBake:
     seconds: float
     load_seconds: float
     device: str
+    cut_nodes: np.ndarray | None = None
+    tree: object = None
 
 
 def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", rays: int = 256, bounces: int = 4,
                   threshold: float = 1e-3, glossy: bool = True, glossy_order: int | None = None,
                   glossy_mode: str = "shadowed", rotate: bool = False, seed: int = 0, environment=None,
-                  device: str | None = None, overwrite: bool = False, progress=None) -> TransferBake:
+                  lod_threshold: float | None = None, tree=None, device: str | None = None, overwrite: bool = False,
+                  progress=None) -> TransferBake:
     """Bake diffuse transfer vectors for every vertex and glossy matrices for vertices whose material has ks > 0.
 
     Writes a ``lodprt-transfer`` store (docs/FORMAT.md, "Environment transfer store") to ``out`` unless it is
     None. ``environment`` (an :class:`lodprt.environment.Environment`) is optional: its coefficients are stored
     as the default lighting for rendering. The transfer itself does not depend on the lighting.
+    With ``lod_threshold`` the vertex hierarchy is built (or ``tree`` used) and only the vertices of
+    :func:`transfer_cut` keep their diffuse transfer vectors in the store; the rest are completed on reading.
     """
     from lodprt import __version__
 
@@ -341,8 +400,18 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     gorder = glossy_order or order
     gmat = glossy_transfer(geom, gids, order=gorder, lighting_order=order, rays=rays, mode=glossy_mode,
                            rotate=rotate, seed=seed) if len(gids) else None
-    seconds = time.perf_counter() - t0
-    result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device)
+    cut_nodes = None
+    hierarchy_seconds = None
+    if lod_threshold is not None:
+        t_h = time.perf_counter()
+        if tree is None:
+            from lodprt.hierarchy import build_hierarchy
+
+            tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
+        hierarchy_seconds = time.perf_counter() - t_h
+        cut_nodes = transfer_cut(tree, diffuse.transfer, lod_threshold)
+    seconds = time.perf_counter() - t0 - (hierarchy_seconds or 0.0)
+    result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device, cut_nodes, tree)
     if out is None:
         return result
     import zarr
@@ -367,7 +436,16 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
         arr("materials/kd", np.array([m.kd for m in scene.materials], np.float32))
         arr("materials/ks", np.array([m.ks for m in scene.materials], np.float32))
         arr("materials/shininess", np.array([m.shininess for m in scene.materials], np.float32))
-        arr("transfer/diffuse", diffuse.transfer)
+        if cut_nodes is None:
+            arr("transfer/diffuse", diffuse.transfer)
+        else:
+            kept = tree.vertex[cut_nodes].astype(np.int32)
+            arr("transfer/vertex_ids", kept)
+            arr("transfer/cut_nodes", cut_nodes)
+            arr("transfer/diffuse", diffuse.transfer[kept])
+            for name, a in tree.to_arrays().items():
+                arr(f"hierarchy/{name}", a)
+            root.require_group("hierarchy").attrs.update(levels=tree.levels, seconds=hierarchy_seconds)
         arr("transfer/glossy_vertex_ids", gids)
         if gmat is not None:
             arr("transfer/glossy", gmat)
@@ -392,6 +470,9 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
             glossy_order=int(gorder) if gmat is not None else None,
             glossy_mode=glossy_mode if gmat is not None else None,
             ray_offset=float(geom.offset),
+            lod_threshold=None if cut_nodes is None else float(lod_threshold),
+            vertices_kept=int(geom.referenced.sum() if cut_nodes is None else len(cut_nodes)),
+            hierarchy_seconds=hierarchy_seconds,
             bake_seconds=float(seconds),
             load_seconds=float(t_load),
             device=device,
@@ -464,3 +545,18 @@ class TransferStore:
     @property
     def order(self) -> int:
         return int(self.attrs["sh_order"])
+
+    def diffuse(self) -> np.ndarray:
+        """(V, 3, n*n) diffuse transfer of every vertex; a LOD store's missing vertices are completed (T-15)."""
+        if not hasattr(self, "_diffuse"):
+            t = self.read("transfer/diffuse")
+            if self.has("transfer/cut_nodes"):
+                from lodprt.hierarchy import Hierarchy
+
+                arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS if self.has(f"hierarchy/{name}")}
+                tree = Hierarchy.from_arrays(arrays)
+                t = complete_transfer(tree, self.read("scene/positions").astype(np.float64),
+                                      self.read("scene/normals").astype(np.float64), self.read("transfer/cut_nodes"),
+                                      t.astype(np.float64)).astype(np.float32)
+            self._diffuse = t
+        return self._diffuse
