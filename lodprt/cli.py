@@ -113,12 +113,43 @@ def _parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser(
         "radiance",
-        help="radiance toward an eye for every vertex, from one light sample",
-        description="Reconstruct from the stored SH coefficients of light sample K the radiance toward the eye "
-        "of every scene vertex (store order) and save it as a (V, 3) float32 .npy (linear RGB). Vertices the "
-        "light cut did not keep are completed from their pre-collapse neighbours (T-15).",
+        help="radiance toward an eye for every vertex, from a light sample or arbitrary point lights",
+        description="Reconstruct the radiance toward the eye of every scene vertex (store order) and save it as "
+        "a (V, 3) float32 .npy (linear RGB): either of light sample K (--sample) or of point lights anywhere in "
+        "the sampled region (--light, repeatable; interpolated from the 8 nearest samples, T-12, and summed). "
+        "Vertices the light cut did not keep are completed from their pre-collapse neighbours (T-15).",
     )
-    _sample_output_args(r, "rad.npy")
+    r.add_argument("store", metavar="OUT.zarr")
+    which = r.add_mutually_exclusive_group(required=True)
+    which.add_argument("--sample", type=int, metavar="K", help="light sample index (see lodprt info)")
+    which.add_argument("--light", type=float, nargs=3, action="append", metavar=("X", "Y", "Z"),
+                       help="a point light's position (repeat for several lights)")
+    r.add_argument("--color", type=float, nargs=3, action="append", default=None, metavar=("R", "G", "B"),
+                   help="RGB intensity of each --light, in order (default: the bake's intensity)")
+    r.add_argument("--outside", choices=("clamp", "error"), default="clamp",
+                   help="a light outside the sampled region: clamp it into the region with a warning (default) or refuse")
+    r.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
+    r.add_argument("-o", "--out", required=True, metavar="rad.npy", help="output .npy (not replaced without --overwrite)")
+    r.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    fr = sub.add_parser(
+        "frames",
+        help="run the view-dependent cut along a camera path and report per-frame times and triangles",
+        description="Move the camera along a path around the scene (orbit, or dolly toward the target) while the "
+        "lights circle above it, update the run-time cut every frame (no drawing) and print per-frame "
+        "milliseconds (cut update, triangulation, relighting) and triangle counts.",
+    )
+    fr.add_argument("store", metavar="OUT.zarr")
+    fr.add_argument("--path", choices=("orbit", "dolly"), default="orbit", help="camera path (default orbit)")
+    fr.add_argument("--frames", type=int, default=120, metavar="N", help="number of frames (default 120)")
+    fr.add_argument("--error-bound", type=float, default=0.25, metavar="E", help="view cut error bound (T-14, default 0.25)")
+    fr.add_argument("--alpha", type=float, default=0.6, metavar="A", help="weight of e_geo against e_lumi (default 0.6)")
+    fr.add_argument("--triangle-budget", type=int, default=None, metavar="T", help="steer the bound toward this many triangles")
+    fr.add_argument("--light", type=float, nargs=3, action="append", default=None, metavar=("X", "Y", "Z"),
+                    help="fixed light position(s) instead of the moving light")
+    fr.add_argument("--size", type=int, nargs=2, default=(800, 600), metavar=("W", "H"), help="screen size for e_geo (default 800 600)")
+    fr.add_argument("--fov", type=float, default=40.0, metavar="DEG", help="vertical field of view (default 40)")
+    fr.add_argument("--device", default=None, metavar="DEV", help="Warp device of the per-frame kernels")
+    fr.add_argument("--json", action="store_true", help="print one JSON object (frames and a summary) instead of the table")
     d = sub.add_parser(
         "diff",
         help="picture of the light cut's error against the full-resolution radiance (figures 14-17)",
@@ -149,7 +180,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     _view_args(cp, "fig.png")
     cp.add_argument("--scale", type=float, default=None, metavar="S",
-                    help="difference (relative to white) at the top of the colour scale (default: the largest)")
+                    help="difference (relative to white) at the top of the colour scale (default: its 99.5th percentile)")
     tt = sub.add_parser(
         "turntable",
         help="an orbit of the camera with moving lights: PNG sequence (a folder) or an animated GIF",
@@ -338,16 +369,62 @@ def _cmd_radiance(args) -> int:
         raise LodprtError(f"{out}: the output must be a .npy file")
     if out.exists() and not args.overwrite:
         raise LodprtError(f"{out}: already exists; pass --overwrite to replace it")
-    rad = open_store(args.store).radiance(args.sample, args.eye)
+    store = open_store(args.store)
+    if args.sample is not None:
+        if args.color:
+            raise LodprtError("--color goes with --light, not with --sample")
+        rad = store.radiance(args.sample, args.eye)
+    else:
+        if args.color is not None and len(args.color) != len(args.light):
+            raise LodprtError(f"--color: {len(args.color)} given for {len(args.light)} --light; give one per light or none")
+        rt = store.runtime(outside=args.outside, lod=False)
+        rt.set_lights(args.light, colors=args.color)
+        rad = rt.radiance(args.eye)
     np.save(out, rad)
     print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
+    return 0
+
+
+def _cmd_frames(args) -> int:
+    from lodprt.runtime import camera_path
+    from lodprt.store import open_store
+
+    if args.frames < 1:
+        raise LodprtError(f"--frames {args.frames}: must be >= 1")
+    store = open_store(args.store)
+    rt = store.runtime(error_bound=args.error_bound, alpha=args.alpha, triangle_budget=args.triangle_budget,
+                       device=args.device)
+    rows = []
+    for k, (camera, lights) in enumerate(camera_path(rt, args.path, args.frames, size=tuple(args.size), fov=args.fov)):
+        rt.set_camera(camera)
+        rt.set_lights(args.light if args.light else lights)
+        s = rt.update().stats
+        rows.append({"frame": k, **{key: s[key] for key in ("triangles", "active_nodes", "nodes_touched", "refined",
+                                                             "coarsened", "ms_cut", "ms_triangulate", "ms_relight",
+                                                             "ms_total")}})
+    ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
+    tris = np.array([r["triangles"] for r in rows])
+    summary = {"frames": len(rows), "path": args.path, "error_bound": args.error_bound, "alpha": args.alpha,
+               "first_frame_ms": rows[0]["ms_total"], "median_ms": float(np.median(ms)),
+               "p95_ms": float(np.percentile(ms, 95)), "median_triangles": float(np.median(tris)),
+               "full_triangles": int(len(store.faces)), "device": rt.device}
+    if args.json:
+        print(json.dumps({"summary": summary, "frames": rows}, indent=2))
+        return 0
+    print(f"{'frame':>5} {'triangles':>9} {'touched':>8} {'cut ms':>7} {'tri ms':>7} {'light ms':>8} {'total ms':>8}")
+    for r in rows:
+        print(f"{r['frame']:>5} {r['triangles']:>9,} {r['nodes_touched']:>8,} {r['ms_cut']:>7.2f} "
+              f"{r['ms_triangulate']:>7.2f} {r['ms_relight']:>8.2f} {r['ms_total']:>8.2f}")
+    print(f"median {summary['median_ms']:.2f} ms per frame after the first ({summary['first_frame_ms']:.0f} ms), "
+          f"p95 {summary['p95_ms']:.2f} ms; median {summary['median_triangles']:,.0f} triangles of "
+          f"{summary['full_triangles']:,} on {rt.device}")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
-    commands = {"bake": _cmd_bake, "info": _cmd_info, "radiance": _cmd_radiance, "diff": _cmd_diff,
+    commands = {"bake": _cmd_bake, "info": _cmd_info, "radiance": _cmd_radiance, "diff": _cmd_diff, "frames": _cmd_frames,
                 "render": _cmd_render, "compare": _cmd_compare, "turntable": _cmd_turntable, "view": _cmd_view,
                 **environment_cli.COMMANDS}
     try:

@@ -1048,6 +1048,72 @@ class Cut:
         lo, hi = self.h.leaf_range[node]
         self.anc[self.h.leaf_order[lo:hi]] = node
 
+    def _edge_segments(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For many nodes at once: (seg, nb) the index into ``nodes`` and the active node at the far end of every
+        original edge leaving the nodes' leaves (one CSR slice per node, concatenated)."""
+        lr = self.h.leaf_range[nodes]
+        lo, hi = self._ptr[lr[:, 0]], self._ptr[lr[:, 1]]
+        n = hi - lo
+        idx = np.repeat(lo - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
+        return np.repeat(np.arange(len(nodes)), n), self.anc[self._nbr[idx]]
+
+    def _set_leaves(self, nodes: np.ndarray) -> None:
+        """anc of every leaf under each of ``nodes`` becomes that node (vectorised over the nodes' slices)."""
+        lr = self.h.leaf_range[nodes]
+        n = lr[:, 1] - lr[:, 0]
+        idx = np.repeat(lr[:, 0] - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
+        self.anc[self.h.leaf_order[idx]] = np.repeat(nodes, n)
+
+    def refine_many(self, nodes) -> np.ndarray:
+        """Split every node of ``nodes`` whose split rule holds now, all at once; returns the (K,) bool mask of the
+        nodes split. Simultaneous splits stay legal: a split only replaces a node by children created before it,
+        so a neighbour's rule (every active neighbour created before it) still holds afterwards."""
+        h = self.h
+        nodes = np.asarray(nodes, np.int64)
+        ok = self.active[nodes] & (h.children[nodes, 0] >= 0)
+        cand = nodes[ok]
+        if len(cand):
+            seg, nb = self._edge_segments(cand)
+            bad = (nb != cand[seg]) & (h.creation[nb] > h.creation[cand[seg]])
+            legal = np.bincount(seg[bad], minlength=len(cand)) == 0
+            go = cand[legal]
+            ch = h.children[go]
+            self.active[go] = False
+            self.active[ch.ravel()] = True
+            self._set_leaves(ch.ravel())
+            ok[np.flatnonzero(ok)[~legal]] = False
+        return ok
+
+    def coarsen_many(self, nodes) -> tuple[np.ndarray, np.ndarray]:
+        """Collapse the children of every node of ``nodes`` whose collapse rule holds now, all at once; returns
+        (done (K,) bool, blocker (K,) int64: one active neighbour forbidding the collapse, -1 where none). Two
+        collapses that are both allowed never touch each other (if their children were adjacent, each rule would
+        need the other parent created later), so doing them together is legal."""
+        h = self.h
+        nodes = np.asarray(nodes, np.int64)
+        c = h.children[nodes]
+        ok = (c[:, 0] >= 0) & self.active[np.maximum(c[:, 0], 0)] & self.active[np.maximum(c[:, 1], 0)]
+        blocker = np.full(len(nodes), -1, np.int64)
+        cand = nodes[ok]
+        if len(cand):
+            seg, nb = self._edge_segments(cand)
+            cc = h.children[cand[seg]]
+            par = h.parent[nb]
+            later = np.where(par < 0, np.iinfo(np.int64).max, h.creation[np.maximum(par, 0)].astype(np.int64))
+            bad = (nb != cc[:, 0]) & (nb != cc[:, 1]) & (later <= h.creation[cand[seg]])
+            legal = np.bincount(seg[bad], minlength=len(cand)) == 0
+            first = np.full(len(cand), -1, np.int64)
+            first[seg[bad][::-1]] = nb[bad][::-1]  # the first blocker of each node
+            go = cand[legal]
+            ch = h.children[go]
+            self.active[ch.ravel()] = False
+            self.active[go] = True
+            self._set_leaves(go)
+            where = np.flatnonzero(ok)
+            blocker[where] = first
+            ok[where[~legal]] = False
+        return ok, blocker
+
     def force_refine(self, node: int) -> int:
         """Make ``node``'s split happen (seed 003, table 5.1 forced refinement): activate it by splitting its
         active ancestor down to it, each split first splitting, recursively, every neighbour the split rule needs

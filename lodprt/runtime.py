@@ -218,6 +218,7 @@ class Runtime:
         self._vf = (order // 3).astype(np.int64)
         self._vf_ptr = np.searchsorted(fv[order], np.arange(V + 1))
         self._tri_anc = None
+        self._dirty, self._settled = True, False
         self._frame = 0  # errors cached per frame: culled, error and the frame they belong to
         self._culled = np.zeros(h.num_nodes, bool)
         self._err = np.zeros(h.num_nodes)
@@ -288,6 +289,7 @@ class Runtime:
         if not e >= 0 or not math.isfinite(e):
             raise LodprtError(f"error_bound {error_bound}: must be a finite number >= 0")
         self.error_bound = e
+        self._dirty = True
         if alpha is not None:
             a = float(alpha)
             if not 0.0 <= a <= 1.0:
@@ -300,6 +302,7 @@ class Runtime:
         self.cut = Cut.base(self.h, self.faces) if self.lod else Cut.full(self.h, self.faces)
         self._converged_once = False
         self._blocker[:] = -1
+        self._dirty = True
 
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
@@ -320,6 +323,7 @@ class Runtime:
         idx, w, moved = self.interp.weights(pos)
         W = np.zeros((len(self.interp.samples), 3))
         np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))  # lights add (thesis 3.4.1)
+        self._dirty = True
         self.light_positions = self.interp.clamp(pos)[0]
         self.light_colors = col
         self.lights_clamped = int(moved.sum())
@@ -334,6 +338,7 @@ class Runtime:
         else:
             self.camera = _as_camera(camera, target=target, up=up, fov=fov, width=width, height=height,
                                      near=near, far=far)
+        self._dirty = True
         self._vp = view_projection(self.camera, self.bounds)
         self._planes = clip_planes(self._vp)
         return self.camera
@@ -432,28 +437,29 @@ class Runtime:
         want_refine = ~culled[:k] & (err[:k] > self.error_bound)
         want_coarsen = culled[k:] | (err[k:] <= self.error_bound)
         refined = coarsened = touched = 0
-        # a collapse found blocked waits until the finer neighbour found blocking it is gone (one per node)
+        # a collapse found blocked waits until the finer neighbour found blocking it is gone (one per node);
+        # allowed collapses and splits are made all at once (Cut.coarsen_many / refine_many)
         todo = cc[want_coarsen]
         blk = self._blocker[todo]
         todo = todo[(blk < 0) | ~cut.active[np.maximum(blk, 0)]]
-        for P in todo[np.argsort(err[k:][want_coarsen][(blk < 0) | ~cut.active[np.maximum(blk, 0)]], kind="stable")]:
-            P = int(P)
-            touched += 1
-            b = cut.try_coarsen(P)
-            self._blocker[P] = b[0] if len(b) else -1
-            coarsened += not len(b)
-        order = np.argsort(-err[:k][want_refine], kind="stable")
-        for node in rc[want_refine][order]:
-            node = int(node)
-            if not cut.active[node]:
-                continue  # split already by a forced refinement, or coarsened away this pass
-            touched += 1
-            if cut.refine(node):
-                refined += 1
-            else:
-                n = cut.force_refine(node)
-                refined += n
-                touched += n
+        touched += len(todo)
+        if len(todo):
+            done, blocker = cut.coarsen_many(todo)
+            self._blocker[todo] = np.where(done, -1, blocker)
+            coarsened += int(done.sum())
+        split = rc[want_refine]
+        split = split[np.argsort(-err[:k][want_refine], kind="stable")]
+        split = split[cut.active[split]]
+        touched += len(split)
+        if len(split):
+            done = cut.refine_many(split)
+            refined += int(done.sum())
+            for node in split[~done]:  # blocked splits: forced refinement of what they need, one by one
+                node = int(node)
+                if cut.active[node]:
+                    n = cut.force_refine(node)
+                    refined += n
+                    touched += n
         return refined, coarsened, touched
 
     def update(self, *, max_passes: int | None = None) -> Frame:
@@ -463,15 +469,18 @@ class Runtime:
         t0 = time.perf_counter()
         self._frame += 1
         refined = coarsened = touched = passes = 0
-        if self.lod:
+        if self.lod and (self._dirty or not self._settled):  # nothing changed since a settled cut: keep it
             limit = max_passes if max_passes is not None else (self.max_passes if self._converged_once else 10_000)
+            self._settled = False
             for _ in range(int(limit)):
                 r, c, t = self._pass()
                 passes += 1
                 refined, coarsened, touched = refined + r, coarsened + c, touched + t
                 if r == 0 and c == 0:
+                    self._settled = True
                     break
             self._converged_once = True
+        self._dirty = False
         t1 = time.perf_counter()
         h = self.h
         vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
@@ -484,8 +493,10 @@ class Runtime:
         if self.triangle_budget is not None:  # steer the bound toward the budget
             if len(tri) > self.triangle_budget:
                 self.error_bound = max(self.error_bound, 1e-4) * 1.25
+                self._dirty = True
             elif len(tri) < 0.8 * self.triangle_budget:
                 self.error_bound /= 1.1
+                self._dirty = True
         stats = {
             "triangles": int(len(tri)),
             "active_nodes": int(len(vid)),
@@ -538,7 +549,9 @@ class Runtime:
                 lo, hi = self._vf_ptr[moved], self._vf_ptr[moved + 1]
                 n = hi - lo
                 idx = np.repeat(lo - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
-                fs = np.unique(self._vf[idx])
+                mark = np.zeros(len(self.faces), bool)  # faces around the moved vertices (a mask: no sort)
+                mark[self._vf[idx]] = True
+                fs = np.flatnonzero(mark)
                 f = self.h.vertex[anc[self.faces[fs]]]
                 self._fmap[fs] = f
                 self._flive[fs] = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
@@ -571,3 +584,43 @@ class Runtime:
         bad = dependency_violations(self.h, self.faces, self.cut.anc)
         if len(bad):
             raise LodprtError(f"the view cut violates {len(bad)} dependencies, e.g. nodes {bad[0].tolist()}")
+
+
+def object_bounds(store) -> np.ndarray:
+    """(2, 3) bounds of the scene's objects without the floor (all referenced vertices when only a floor)."""
+    pos = np.asarray(store.positions)
+    oid = np.asarray(store.read("scene/object_id"))
+    names = list(store.root["scene"].attrs.get("object_names", []))
+    used = np.zeros(len(pos), bool)
+    used[np.asarray(store.faces).ravel()] = True
+    keep = used.copy()
+    if "floor" in names:
+        keep &= oid != names.index("floor")
+    p = pos[keep] if keep.any() else pos[used] if used.any() else pos
+    return np.array([p.min(0), p.max(0)]) if len(p) else np.zeros((2, 3))
+
+
+def camera_path(rt: "Runtime", path: str, frames: int, *, size=(800, 600), fov: float = 40.0, light_turns: float = 2.0):
+    """Yields ``frames`` (Camera, lights (1, 3)) pairs: ``orbit`` circles the objects at 2.2 object sizes, 25
+    degrees above them; ``dolly`` moves from 3 object sizes to 0.8 straight toward them; the light circles inside
+    the sampled light box ``light_turns`` times over the path."""
+    if path not in ("orbit", "dolly"):
+        raise LodprtError(f"camera path {path!r}: choose 'orbit' or 'dolly'")
+    b = object_bounds(rt.store)
+    c = 0.5 * (b[0] + b[1])
+    size_ = float(np.linalg.norm(b[1] - b[0])) or 1.0
+    box = np.asarray(rt.store.root["lights"].attrs["box"], np.float64)
+    lc, lh = 0.5 * (box[:3] + box[3:]), 0.5 * (box[3:] - box[:3])
+    elev = math.radians(25.0)
+    for k in range(int(frames)):
+        t = k / max(int(frames), 1)
+        if path == "orbit":
+            a = 2.0 * math.pi * t
+            dist = 2.2 * size_
+        else:
+            a = 0.6
+            dist = size_ * (3.0 - 2.2 * t)
+        eye = c + dist * np.array([math.cos(elev) * math.sin(a), math.sin(elev), math.cos(elev) * math.cos(a)])
+        la = 2.0 * math.pi * light_turns * t
+        light = lc + 0.8 * lh * np.array([math.cos(la), 0.0, math.sin(la)])
+        yield Camera(eye=tuple(eye), target=tuple(c), fov=fov, width=int(size[0]), height=int(size[1])), light[None, :]
