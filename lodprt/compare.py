@@ -17,7 +17,7 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     Both frames come from one run time (``frame_source``; LOD switched off for the second), share the white point
     (``white``, default the run time's) and are drawn linear for the difference: ``|LOD - full|`` averaged over
     RGB, over ``white``; pixels either frame covers count (silhouette changes show). ``scale``: the difference at
-    the top of the colour scale (default the largest). ``wireframe`` overlays the cut on the LOD panel.
+    the top of the colour scale (default the 99.5th percentile over the covered pixels; larger ones saturate). ``wireframe`` overlays the cut on the LOD panel.
     """
     import matplotlib
 
@@ -41,8 +41,8 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
         img_full = r.image(full, **draw)
     covered = (lin_lod.max(2) > 0) | (lin_full.max(2) > 0)
     rel = np.abs(lin_lod - lin_full).mean(2) / white
-    vmax = float(scale) if scale is not None else max(float(rel.max()), 1e-12)
     diff = rel[covered]
+    vmax = float(scale) if scale is not None else max(float(np.percentile(diff, 99.5)) if diff.size else 0.0, 1e-12)
     mse = float(np.mean((np.minimum(lin_lod, white) - np.minimum(lin_full, white))[covered] ** 2)) / white**2
     psnr = float(10 * np.log10(1.0 / mse)) if mse > 0 else float("inf")
     rmse = float(np.sqrt(np.mean((lin_lod - lin_full)[covered] ** 2)) / max(np.sqrt(np.mean(lin_full[covered] ** 2)), 1e-30))

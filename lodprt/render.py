@@ -1,7 +1,14 @@
-"""Offscreen rendering with moderngl (headless EGL: Mesa llvmpipe on CPU machines, the driver on GPUs).
+"""Rendering with moderngl (offscreen: headless EGL, Mesa llvmpipe on CPU machines, the driver on GPUs; on screen:
+the viewer's window context). docs/DISPLAY.md has the whole story.
 
 Camera convention: perspective, vertical field of view in degrees, right-handed, y up by default; the image's
-first row is its top. Colours are per vertex, interpolated across triangles, written as given (display space).
+first row is its top.
+
+* ``render``: per-vertex display colours, interpolated (``lodprt diff``'s panels).
+* ``Renderer``: draws run-time ``Frame``s, radiance reconstructed from SH coefficients in the shader (per fragment
+  or per vertex), tone mapping, wireframe, light markers, linear float32 output.
+* ``full_frame`` / ``frame_source``: frames at full resolution from a store, or from its run time (view cut).
+* ``render_to_file``, ``turntable``: what ``lodprt render`` and ``lodprt turntable`` do.
 """
 
 from __future__ import annotations
@@ -260,7 +267,7 @@ void main() {
     vec3 c = srgb(clamp(L * scale, 0.0, 1.0));
     if (wireframe) {  // edges from the barycentrics: about one pixel wide, antialiased
         float e = min(min(g_bary.x, g_bary.y), g_bary.z);
-        c = mix(wire_color, c, smoothstep(0.0, 1.0, e / max(fwidth(e), 1e-8)));
+        c = mix(c, wire_color, 0.8 * (1.0 - smoothstep(0.0, 1.0, e / max(fwidth(e), 1e-8))));
     }
     f_col = vec4(c, 1.0);
 }

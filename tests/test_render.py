@@ -218,11 +218,15 @@ def test_wireframe_and_light_markers_appear(bunny_store, renderer):
     """Wireframe edges show in the wire colour only when asked; a light marker covers the light's pixel."""
     cam = Camera(eye=(0.0, 0.45, 0.7), target=(0.0, 0.15, 0.0), fov=45.0, width=200, height=160)
     frame = full_frame(bunny_store, cam, lights=[(0.05, 0.35, 0.05)], colors=[(2.0, 1.0, 0.5)])
-    magenta = np.array([255, 0, 255])
     plain = renderer.image(frame, light_markers=False)
     wired = renderer.image(frame, wireframe=True, wire_color=(1.0, 0.0, 1.0), light_markers=False)
-    assert (plain == magenta).all(-1).sum() == 0
-    assert (wired == magenta).all(-1).sum() > 500
+
+    def magenta(img):  # 80% magenta over grey shading: red and blue far above green
+        r, g, b = (img[..., k].astype(int) for k in range(3))
+        return (r - g > 120) & (b - g > 120)
+
+    assert magenta(plain).sum() == 0
+    assert magenta(wired).sum() > 500
     marked = renderer.image(frame)
     view, proj = camera_matrices(cam, np.vstack([frame.positions, frame.lights]))
     h = proj @ view @ np.append(frame.lights[0], 1.0)
