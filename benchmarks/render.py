@@ -13,7 +13,7 @@ radiance from interpolated coefficients, tone mapping) until ``glFinish``. Basel
 
 from __future__ import annotations
 
-import dataclasses
+import os
 import shutil
 import tempfile
 import time
@@ -94,12 +94,12 @@ def main():
                         print(f"{size} {mode} {shading}: {r['fps']:.1f} fps", flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    print(f"GL renderer: {gl}")
+    print(f"GL renderer: {gl}; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (other work slows llvmpipe)")
     print(table(rows, [("size", "size", "s"), ("mode", "mode", "s"), ("shading", "radiance per", "s"),
                        ("triangles", "triangles", ","), ("update_ms", "update ms", ".1f"), ("draw_ms", "draw ms", ".1f"),
                        ("draw_fps", "draw fps", ".1f"), ("fps", "frame fps", ".1f")]))
     name = "render" + ("-quick" if args.quick else "")
-    env = dict(environment("cpu"), gl_renderer=gl)
+    env = dict(environment("cpu"), gl_renderer=gl, cpu_count=os.cpu_count(), load_average_after=os.getloadavg())
     print("wrote", write(name, {"benchmark": "render", "quick": args.quick, "environment": env,
                                 "vertices": nv, "frames": frames, "rows": rows}, args.json))
     import matplotlib
