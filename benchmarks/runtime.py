@@ -1,0 +1,199 @@
+"""Run time: per-frame cost of the view-dependent cut with moving lights, against relighting the full mesh.
+
+    python benchmarks/runtime.py [--quick] [--json PATH] [--store OUT.zarr] [--device cpu|cuda]
+
+Scene: the shared Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 30
+degrees (the thesis' setting for its run-time figures 21-24), baked here into a temporary store unless --store
+names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
+
+1. Camera paths (``lodprt.runtime.camera_path``): an orbit and a dolly, each with a light circling inside the
+   sampled region, error bound 0.25, alpha 0.6, 800 x 600 screen. Per frame: ``Runtime.update()`` split into cut
+   update, triangulation and relighting (ms), and triangles. Baseline in the same run: the same paths with LOD
+   off (the full mesh relit every frame by the same kernel).
+2. Error-bound sweep 0.2, 0.25, 0.315, 0.4 at alpha 0.6 over the orbit: median triangles beside the thesis'
+   figures 21-24, median frame time, and the error of the frame against the full-resolution frame: both drawn
+   by ``lodprt.render.Renderer`` as linear radiance images (every 10th frame, 400 x 300) and compared over the
+   pixels either covers (relative RMSE and the 99th percentile of the per-pixel relative error).
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import environment, parser, plot_path, table, thesis_scene, write
+
+THESIS_TRIANGLES = {0.2: 13335, 0.25: 9115, 0.315: 5742, 0.4: 2799}
+KEYS = ("ms_cut", "ms_triangulate", "ms_relight", "ms_total", "triangles", "nodes_touched")
+
+
+def build_store(quick: bool, folder: Path, device: str) -> Path:
+    from lodprt.bake import bake
+
+    path = folder / "runtime-bench.zarr"
+    bake(thesis_scene(quick=quick), path, sh_order=4, device=device, threshold_deg=30.0)
+    return path
+
+
+def run_path(rt, path: str, frames: int) -> list[dict]:
+    """Per-frame stats of ``rt`` along a camera path (the first frame, which converges from the base, kept apart)."""
+    from lodprt.runtime import camera_path
+
+    out = []
+    for cam, lights in camera_path(rt, path, frames):
+        rt.set_camera(cam)
+        rt.set_lights(lights)
+        s = rt.update().stats
+        out.append({k: s[k] for k in KEYS})
+    return out
+
+
+def summary(rows: list[dict]) -> dict:
+    later = rows[1:] or rows
+    out = {"first_ms": rows[0]["ms_total"]}
+    for k in KEYS:
+        a = np.array([r[k] for r in later], np.float64)
+        out[f"median_{k}"] = float(np.median(a))
+        out[f"p95_{k}"] = float(np.percentile(a, 95))
+    return out
+
+
+def image_error(lod_img: np.ndarray, full_img: np.ndarray) -> tuple[float, float]:
+    """Relative RMSE and 99th-percentile per-pixel relative error over the pixels either image covers."""
+    cover = (np.abs(lod_img).sum(2) > 0) | (np.abs(full_img).sum(2) > 0)
+    a, b = lod_img[cover].astype(np.float64), full_img[cover].astype(np.float64)
+    rmse = float(np.sqrt(np.mean((a - b) ** 2)) / max(np.sqrt(np.mean(b**2)), 1e-30))
+    peak = float(np.percentile(np.abs(b).max(1), 99)) or 1.0
+    return rmse, float(np.percentile(np.abs(a - b).max(1) / peak, 99))
+
+
+def sweep(store, device: str, frames: int, every: int) -> list[dict]:
+    """Error-bound sweep over the orbit: triangles, frame time and image error against the full mesh."""
+    from lodprt.render import Renderer
+    from lodprt.runtime import Camera, camera_path
+
+    full = store.runtime(lod=False, device=device)
+    rows = []
+    with Renderer() as renderer:
+        for bound in (0.2, 0.25, 0.315, 0.4):
+            rt = store.runtime(error_bound=bound, alpha=0.6, device=device)
+            tris, ms, errs, p99 = [], [], [], []
+            for k, (cam, lights) in enumerate(camera_path(rt, "orbit", frames)):
+                rt.set_camera(cam)
+                rt.set_lights(lights)
+                f = rt.update()
+                if k:
+                    tris.append(f.stats["triangles"])
+                    ms.append(f.stats["ms_total"])
+                if k % every == 0:
+                    small = Camera(eye=cam.eye, target=cam.target, fov=cam.fov, width=400, height=300)
+                    full.set_camera(small)
+                    full.set_lights(lights)
+                    ref = renderer.image(full.update(), linear=True)
+                    img = renderer.image(f, linear=True, camera=small)
+                    e, q = image_error(img, ref)
+                    errs.append(e)
+                    p99.append(q)
+            rows.append({"error_bound": bound, "alpha": 0.6, "median_triangles": float(np.median(tris)),
+                         "thesis_triangles": THESIS_TRIANGLES[bound], "median_ms": float(np.median(ms)),
+                         "rel_rmse": float(np.mean(errs)), "p99_rel_error": float(np.mean(p99))})
+            print(f"bound {bound}: {rows[-1]['median_triangles']:,.0f} triangles, {rows[-1]['median_ms']:.1f} ms, "
+                  f"image rRMSE {rows[-1]['rel_rmse']:.4f}", flush=True)
+    return rows
+
+
+def main():
+    p = parser(__doc__.splitlines()[0])
+    p.add_argument("--store", default=None, help="use this bake store instead of baking the thesis scene")
+    args = p.parse_args()
+    from lodprt.devices import resolve_device
+    from lodprt.store import open_store
+
+    device = resolve_device(args.device)
+    frames = 40 if args.quick else 240
+    tmp = Path(tempfile.mkdtemp(prefix="lodprt-runtime-bench-"))
+    try:
+        t = time.perf_counter()
+        path = Path(args.store) if args.store else build_store(args.quick, tmp, device)
+        store = open_store(path)
+        samples = store.num_samples
+        print(f"store {path.name}: {store.num_vertices:,} vertices, {len(store.faces):,} triangles "
+              f"({time.perf_counter() - t:.0f} s)", flush=True)
+        t = time.perf_counter()
+        lod = store.runtime(error_bound=0.25, alpha=0.6, device=device)
+        init_s = time.perf_counter() - t
+        full = store.runtime(lod=False, device=device)
+        paths = {}
+        for kind in ("orbit", "dolly"):
+            paths[kind] = {"lod": run_path(lod, kind, frames), "full": run_path(full, kind, frames)}
+            lod.set_lod(True)  # the dolly starts again from the base mesh, like a fresh view
+            s, b = summary(paths[kind]["lod"]), summary(paths[kind]["full"])
+            print(f"{kind}: view cut {s['median_ms_total']:.1f} ms ({s['median_triangles']:,.0f} tri), full mesh "
+                  f"{b['median_ms_total']:.1f} ms ({b['median_triangles']:,.0f} tri)", flush=True)
+        rows = []
+        for kind, runs in paths.items():
+            for mode, label in (("lod", "view cut 0.25"), ("full", "full mesh")):
+                rows.append({"path": kind, "mode": label, **summary(runs[mode])})
+        for r in rows:
+            base = next(x for x in rows if x["path"] == r["path"] and x["mode"] == "full mesh")
+            r["speedup"] = base["median_ms_total"] / r["median_ms_total"]
+        sweep_rows = sweep(store, device, 40 if args.quick else 120, 10)
+        nv, nf = store.num_vertices, int(len(store.faces))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+    print(f"\nRuntime init (completion of {samples} samples, per-node spreads, upload): {init_s:.1f} s")
+    print(table(rows, [("path", "path", "s"), ("mode", "mode", "s"), ("median_triangles", "triangles", ",.0f"),
+                       ("median_ms_cut", "cut ms", ".2f"), ("median_ms_triangulate", "tri ms", ".2f"),
+                       ("median_ms_relight", "relight ms", ".2f"), ("median_ms_total", "median ms", ".2f"),
+                       ("p95_ms_total", "p95 ms", ".2f"), ("first_ms", "first ms", ".0f"),
+                       ("speedup", "vs full", ".2f")]))
+    print()
+    print(table(sweep_rows, [("error_bound", "error bound", ".3f"), ("median_triangles", "triangles", ",.0f"),
+                             ("thesis_triangles", "thesis tri", ","), ("median_ms", "median ms", ".2f"),
+                             ("rel_rmse", "image rRMSE", ".4f"), ("p99_rel_error", "p99 rel err", ".3f")]))
+    name = "runtime" + ("-quick" if args.quick else "")
+    print("wrote", write(name, {"benchmark": "runtime", "quick": args.quick, "environment": environment(device),
+                                "vertices": nv, "faces": nf, "frames": frames,
+                                "init_seconds": init_s, "paths": rows, "sweep": sweep_rows,
+                                "per_frame": paths}, args.json))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
+    for kind, ls in (("orbit", "-"), ("dolly", ":")):
+        for mode, col in (("lod", "C0"), ("full", "C3")):
+            ms = [r["ms_total"] for r in paths[kind][mode][1:]]
+            axes[0].plot(ms, ls, color=col, lw=0.8, label=f"{kind}, {'view cut' if mode == 'lod' else 'full mesh'}")
+        axes[1].plot([r["triangles"] for r in paths[kind]["lod"][1:]], ls, color="C0", lw=0.8, label=f"{kind}, view cut")
+    axes[0].set_yscale("log")
+    axes[0].set_xlabel("frame")
+    axes[0].set_ylabel("ms per frame (cut + triangulation + relighting)")
+    axes[0].legend(fontsize=7)
+    axes[1].set_xlabel("frame")
+    axes[1].set_ylabel("triangles")
+    axes[1].legend(fontsize=7)
+    for r in sweep_rows:
+        axes[2].scatter(r["median_ms"], r["rel_rmse"], color="C0")
+        axes[2].annotate(f"{r['error_bound']} ({r['median_triangles']:,.0f} tri)", (r["median_ms"], r["rel_rmse"]),
+                         fontsize=7, xytext=(4, 2), textcoords="offset points")
+    full_ms = next(x for x in rows if x["path"] == "orbit" and x["mode"] == "full mesh")["median_ms_total"]
+    axes[2].axvline(full_ms, color="C3", ls="--", lw=0.8, label=f"full mesh {full_ms:.0f} ms (error 0)")
+    axes[2].set_xlabel("median ms per frame")
+    axes[2].set_ylabel("image relative RMSE vs full mesh")
+    axes[2].legend(fontsize=7)
+    fig.suptitle(f"Run time on {nv:,} vertices ({environment(device)['device']}): view cut vs full mesh",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(plot_path(name), dpi=120)
+    print("wrote", plot_path(name))
+
+
+if __name__ == "__main__":
+    main()
