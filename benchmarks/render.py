@@ -36,7 +36,6 @@ def measure(rt, renderer, camera, lights, frames: int, per_vertex: bool) -> dict
     """Mean update and draw milliseconds over ``frames`` frames of a 1-degree orbit with a moving light."""
     from lodprt.render import orbit
 
-    centre = np.asarray(camera.target)
     rt.set_lights(lights)
     rt.set_camera(camera)
     frame = rt.update()  # converge the cut once (first frame from the base mesh), warm the shader
@@ -109,7 +108,6 @@ def main():
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
     for ax, shading in zip(axes, ("fragment", "vertex")):
-        labels = [f"{s[0]}" for s in sizes]
         x = np.arange(len(sizes))
         for off, mode in ((-0.2, "view cut"), (0.2, "full mesh")):
             sel = [r for r in rows if r["mode"] == mode and r["shading"] == shading]

@@ -18,6 +18,7 @@ and draw). Without a display it raises LodprtError saying what is missing (no DI
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import logging
 import os
 import time
@@ -51,11 +52,9 @@ def _check_display() -> None:
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise LodprtError("no display: DISPLAY is not set (run it on a desktop, over ssh -X, or under a virtual "
                           "X server: xvfb-run -a lodprt view ...); offscreen pictures: lodprt render")
-    try:
-        import moderngl_window  # noqa: F401
-        import pyglet  # noqa: F401
-    except ImportError as exc:
-        raise LodprtError(f"the viewer needs moderngl-window and pyglet ({exc}); pip install moderngl-window") from exc
+    missing = [name for name in ("moderngl_window", "pyglet") if importlib.util.find_spec(name) is None]
+    if missing:
+        raise LodprtError(f"the viewer needs {' and '.join(missing)}: pip install moderngl-window")
 
 
 class _Overlay:

@@ -1,7 +1,6 @@
 """The interactive viewer: its controls without a window, a clear error without a display, and a real window
 under a virtual X server (Xvfb) when one is installed."""
 
-import dataclasses
 import os
 import shutil
 import subprocess
