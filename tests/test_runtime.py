@@ -259,3 +259,39 @@ def test_bad_settings_are_refused(store, rt):
         rt.set_lights([[0, 0.3, 0]], colors=[[-1, 0, 0]])
     with pytest.raises(LodprtError, match="no camera"):
         Runtime(store).update()
+
+
+def test_cli_radiance_with_lights(store, bunny_bake, tmp_path, capsys):
+    """`lodprt radiance --light` writes the interpolated, completed radiance; bad lights give one-line errors."""
+    from lodprt.cli import main
+
+    x = 0.5 * (store.light_positions[0] + store.light_positions[4])
+    out = tmp_path / "rad.npy"
+    args = ["radiance", str(bunny_bake), "--light", *map(str, x), "--color", "1", "0.5", "0.25", "--eye", "0", "0.3", "0.6"]
+    assert main(args + ["-o", str(out)]) == 0
+    r = Runtime(store, lod=False)
+    r.set_lights([x], colors=[(1, 0.5, 0.25)])
+    want = r.radiance((0, 0.3, 0.6))
+    np.testing.assert_allclose(np.load(out), want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    assert main(args + ["-o", str(out)]) == 2  # exists, no --overwrite
+    hi = np.asarray(store.root["lights"].attrs["box"])[3:] + 1
+    assert main(["radiance", str(bunny_bake), "--light", *map(str, hi), "--outside", "error", "--eye", "0", "0", "1",
+                 "-o", str(tmp_path / "x.npy")]) == 2
+    assert "outside the sampled region" in capsys.readouterr().err
+    assert main(["radiance", str(bunny_bake), "--light", "0", "0.3", "0", "--color", "1", "1", "1", "--color", "1", "1",
+                 "1", "--eye", "0", "0", "1", "-o", str(tmp_path / "y.npy")]) == 2
+    assert "one per light" in capsys.readouterr().err
+
+
+def test_cli_frames_json(bunny_bake, capsys):
+    """`lodprt frames --json` reports every frame with fewer triangles than the full mesh and a summary."""
+    import json
+
+    from lodprt.cli import main
+
+    assert main(["frames", str(bunny_bake), "--frames", "6", "--path", "dolly", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["frames"]) == 6
+    assert all(0 < f["triangles"] < doc["summary"]["full_triangles"] for f in doc["frames"])
+    assert doc["summary"]["median_ms"] > 0
+    assert main(["frames", str(bunny_bake), "--frames", "0"]) == 2
