@@ -9,7 +9,9 @@ the procedural sky. Three tables:
    bounce passes), with the error of the relit radiance against a high-ray reference bake (1024 rays; quick 128);
 2. the same bakes by a brute-force float64 numpy + Embree (embreex) baker on the same rays (vectorised: one
    Embree call per pass, one matrix product for the projection), the speed ratio and the agreement;
-3. mip-level projection of a 6 x 256 x 256 cube map (quick 6 x 64 x 64) at order 3: time per projection and the
+3. LOD: the transfer cut of the vertex hierarchy at several thresholds, vertices and bytes kept, and the error of
+   the relit radiance after T-15 completion against the full transfer;
+4. mip-level projection of a 6 x 256 x 256 cube map (quick 6 x 64 x 64) at order 3: time per projection and the
    error of the coefficients and of the 9-coefficient irradiance against level 0 (I-3.2).
 """
 
@@ -145,6 +147,31 @@ def main():
     print(f"transfer bake, {scene.source}: {nv:,} vertices, SH order {order}, device {device} (kernel load {load_s:.2f} s)")
     print(table(rows, cols))
 
+    # LOD: keep vertices where transfer vectors differ (the reference 2-bounce transfer), complete the rest (T-15)
+    from lodprt.hierarchy import build_hierarchy
+    from lodprt.transfer import complete_transfer, transfer_cut
+
+    t0 = time.perf_counter()
+    tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
+    tree_s = time.perf_counter() - t0
+    full_t = refs[("interreflected", 2)]
+    lods = []
+    for eps in ([0.02, 0.05, 0.1] if args.quick else [0.01, 0.02, 0.05, 0.1, 0.2]):
+        t0 = time.perf_counter()
+        cut = transfer_cut(tree, full_t, eps)
+        cut_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        done = complete_transfer(tree, scene.positions, scene.normals, cut, full_t[tree.vertex[cut]])
+        comp_s = time.perf_counter() - t0
+        lods.append({"threshold": eps, "vertices_kept": len(cut), "fraction": len(cut) / nv,
+                     "kib": len(cut) * full_t[0].size * 4 / 1024, "cut_s": cut_s, "complete_s": comp_s,
+                     "relit_error": relit_error(done, full_t, lighting, geom.referenced)})
+    print(f"\nLOD (transfer cut + T-15 completion) of the {ref_rays}-ray 2-bounce transfer; hierarchy {tree_s:.1f} s, "
+          f"full {nv:,} vertices = {nv * full_t[0].size * 4 / 1024:,.0f} KiB")
+    print(table(lods, [("threshold", "threshold", ".2f"), ("vertices_kept", "kept", ",d"), ("fraction", "fraction", ".3f"),
+                       ("kib", "KiB", ",.0f"), ("cut_s", "cut s", ".3f"), ("complete_s", "complete s", ".3f"),
+                       ("relit_error", "relit RMS err", ".2e")]))
+
     res_cube = 64 if args.quick else 256
     env = E.procedural("sky", resolution=res_cube, kind="cube")
     n = np.random.default_rng(0).normal(size=(2000, 3))
@@ -164,21 +191,33 @@ def main():
 
     results = {"benchmark": "environment", "quick": args.quick, "scene": scene.source, "vertices": nv,
                "sh_order": order, "reference_rays": ref_rays, "kernel_load_s": load_s, "transfer": rows, "mip": mips,
+               "lod": lods, "hierarchy_s": tree_s,
                "environment": environment(device)}
     print(f"\nwrote {write('environment' + ('-quick' if args.quick else ''), results, args.json)}")
 
+    out = plot_path("environment" + ("-quick" if args.quick else ""))
+    plot(results, out)
+    print(f"wrote {out}")
+
+
+def plot(results: dict, out) -> None:
+    """The three panels from a results dict (also: python -c 'plot(json.load(...), path)' to redraw)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    rows, mips, nv, ref_rays = results["transfer"], results["mip"], results["vertices"], results["reference_rays"]
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
-    for mode, b in settings:
+    settings = sorted({(r["mode"], r["bounces"]) for r in rows}, key=lambda x: x[1])
+    for k, (mode, b) in enumerate(settings):
         rs = [r for r in rows if r["mode"] == mode and r["bounces"] == b]
         label = mode if mode == "shadowed" else f"{b} bounce(s)"
-        ax[0].plot([r["rays"] for r in rs], [r["warp_us_per_vertex"] for r in rs], "o-", label=f"warp, {label}")
-        ax[0].plot([r["rays"] for r in rs], [1e6 * r["numpy_embree_s"] / nv for r in rs], "x--", label=f"numpy+embree, {label}")
-        ax[1].loglog([r["warp_us_per_vertex"] for r in rs], [r["error_vs_ref"] for r in rs], "o-", label=label)
+        col = f"C{k}"
+        ax[0].plot([r["rays"] for r in rs], [r["warp_us_per_vertex"] for r in rs], "o-", color=col, label=f"warp, {label}")
+        ax[0].plot([r["rays"] for r in rs], [1e6 * r["numpy_embree_s"] / nv for r in rs], "x--", color=col,
+                   label=f"numpy+embree, {label}")
+        ax[1].loglog([r["warp_us_per_vertex"] for r in rs], [r["error_vs_ref"] for r in rs], "o-", color=col, label=label)
         for r in rs:
             ax[1].annotate(str(r["rays"]), (r["warp_us_per_vertex"], r["error_vs_ref"]), fontsize=7)
     ax[0].set(xlabel="rays per vertex", ylabel="bake time per vertex (us)", title="transfer bake cost", xscale="log", yscale="log")
@@ -186,18 +225,19 @@ def main():
     ax[1].set(xlabel="warp time per vertex (us)", ylabel=f"relit radiance error vs {ref_rays} rays",
               title="error against run time (labels: rays)")
     ax[1].legend(fontsize=7)
-    ax[2].semilogy([m["level"] for m in mips], [m["coeff_rel_error"] + 1e-17 for m in mips], "o-", label="coefficient rel. error")
-    ax[2].semilogy([m["level"] for m in mips], [m["irradiance_max_rel_error"] + 1e-17 for m in mips], "s-", label="irradiance max rel. error")
+    lv = [m for m in mips if m["level"] > 0]
+    ax[2].semilogy([m["level"] for m in lv], [m["coeff_rel_error"] for m in lv], "o-", label="coefficient rel. error")
+    ax[2].semilogy([m["level"] for m in lv], [m["irradiance_max_rel_error"] for m in lv], "s-", label="irradiance max rel. error")
     ax2 = ax[2].twinx()
     ax2.semilogy([m["level"] for m in mips], [m["project_ms"] for m in mips], "k^:", label="projection ms")
     ax2.set_ylabel("projection time (ms)")
-    ax[2].set(xlabel=f"mip level (0 = {res_cube}x{res_cube} faces)", title="mip-level projection (I-3.2)")
+    ax[2].set(xlabel=f"mip level (0 = {mips[0]['face']} faces)", ylabel="error against level 0",
+              title="mip-level projection (I-3.2)")
     ax[2].legend(fontsize=7, loc="upper left")
     ax2.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
-    out = plot_path("environment" + ("-quick" if args.quick else ""))
     fig.savefig(out, dpi=110)
-    print(f"wrote {out}")
+    plt.close(fig)
 
 
 if __name__ == "__main__":

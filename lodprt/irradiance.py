@@ -15,7 +15,8 @@ Lambertian surface of albedo ``kd`` is ``kd E(n) / pi``. The same E is a quadrat
          [ c2 L11,  c2 L1-1, c2 L10, c4 L00 - c5 L20]]
 
 with the table-1 constants c1 = 0.429043, c2 = 0.511664, c3 = 0.743125, c4 = 0.886227, c5 = 0.247708, derived
-here in float64 from A_l and the SH normalisations (the tests check the printed digits). The seed's GPU variant
+here in float64 from A_l and the SH normalisations (within one unit of the printed sixth digit: the exact c2, c3
+round to 0.511663, 0.743124; the tests check it). The seed's GPU variant
 (I-7, its table 1) packs the same polynomial for three channels into 7 vec4 constant registers
 ``cAr cAg cAb cBr cBg cBb cC``:
 
