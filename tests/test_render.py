@@ -146,8 +146,9 @@ def psnr(ref, got) -> float:
 
 @pytest.mark.parametrize("per_vertex", [False, True], ids=["per-fragment", "per-vertex"])
 def test_render_agrees_with_cpu_ray_cast(bunny_store, renderer, per_vertex):
-    """The 256x256 EGL render of the order-4 bunny bake matches CPU ray casting of the same frame: PSNR >= 35 dB
-    over the covered pixels, and the same pixels are covered."""
+    """The 256x256 EGL render of the order-4 bunny bake matches CPU ray casting of the same frame: PSNR >= 60 dB
+    over the covered pixels (the issue asks 35; ~120 is float32 agreement, a wrong SH sign drops it to ~47), and
+    the same pixels are covered."""
     frame = full_frame(bunny_store, CAM, sample=0)
     img = renderer.image(frame, linear=True, per_vertex=per_vertex)
     assert img.shape == (256, 256, 3) and img.dtype == np.float32
@@ -157,7 +158,7 @@ def test_render_agrees_with_cpu_ray_cast(bunny_store, renderer, per_vertex):
     assert np.mean(drawn != (covered & (lit | drawn))) < 0.01  # coverage differs only along silhouettes
     assert (img[~covered] == 0).mean() > 0.99  # background 0
     value = psnr(ref[covered], img[covered].astype(np.float64))
-    assert value >= 35.0, f"PSNR {value:.1f} dB"
+    assert value >= 60.0, f"PSNR {value:.1f} dB"
 
 
 def test_vertex_radiance_projects_onto_its_pixel(bunny_store, renderer):
