@@ -10,6 +10,10 @@ Public API (everything else may change)::
     rt.set_lights([(0.1, 0.3, 0.0)]); rt.set_camera((0, 0.4, 1.2), (0, 0.1, 0), fov=40, width=800, height=600)
     frame = rt.update()                               # positions, triangles, coefficients, radiance, stats
 
+    env = lodprt.load_environment("sky")              # or a lat-long .hdr/.exr/.npy, a cube map (docs/ENVIRONMENT.md)
+    lodprt.bake_transfer(scene, "env.zarr", order=3, mode="interreflected", environment=env)
+    rgb = lodprt.relit_radiance(lodprt.open_transfer("env.zarr"), env.project(3), eye=(0, 0.5, 1))  # (V, 3)
+
 Names are imported on first use, so ``import lodprt`` stays cheap (Warp loads only when a kernel is needed).
 """
 
@@ -29,6 +33,11 @@ _LAZY = {
     "Camera": "lodprt.runtime",
     "Frame": "lodprt.runtime",
     "LightInterpolator": "lodprt.lights",
+    "Environment": "lodprt.environment",
+    "load_environment": "lodprt.environment",
+    "bake_transfer": "lodprt.transfer",
+    "open_transfer": "lodprt.relight",
+    "relit_radiance": "lodprt.relight",
 }
 
 __all__ = ["LodprtError", "SceneError", "StoreError", *_LAZY]

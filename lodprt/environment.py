@@ -38,6 +38,7 @@ import dataclasses
 import functools
 import os
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -473,7 +474,9 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
             import imageio.v3 as iio
 
             try:
-                return np.asarray(iio.imread(path), np.float64)
+                with warnings.catch_warnings():  # imageio probes every plugin, some of them deprecated
+                    warnings.simplefilter("ignore", DeprecationWarning)
+                    return np.asarray(iio.imread(path, extension=".exr"), np.float64)
             except (OSError, ValueError, RuntimeError) as exc:
                 raise EnvironmentMapError(
                     f"{path}: imageio cannot read this .exr ({exc}); install an EXR backend "

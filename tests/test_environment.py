@@ -232,3 +232,19 @@ def test_procedural_names_with_resolution():
     """'sky:32' is the procedural sky at 32 x 64 texels."""
     env = E.load_environment("sky:32")
     assert env.kind == "latlong" and env.data.shape == (32, 64, 3)
+
+
+def test_exr_without_backend_or_corrupt_is_named(tmp_path):
+    """A .exr imageio cannot decode gives a LodprtError naming the file and how to get an EXR backend."""
+    (tmp_path / "broken.exr").write_bytes(b"not an exr")
+    with pytest.raises(LodprtError, match=r"broken.exr: (imageio cannot read this .exr|unreadable)"):
+        E.load_environment(tmp_path / "broken.exr")
+
+
+def test_public_api_names():
+    """lodprt exposes load_environment, Environment, bake_transfer, open_transfer and relit_radiance lazily."""
+    import lodprt
+
+    assert lodprt.load_environment is E.load_environment and lodprt.Environment is E.Environment
+    for name in ("bake_transfer", "open_transfer", "relit_radiance"):
+        assert callable(getattr(lodprt, name)) and name in lodprt.__all__
