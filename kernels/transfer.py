@@ -62,10 +62,11 @@ def diffuse_direct(
     offset: float,  # In: ray origin offset along the normal
     shadowed: int,  # In: 1 to cast shadow rays (M_p = H_N V_p, P-10), 0 for H_N alone
     max_dist: float,  # In: ray length
+    first: int,  # In: vertex of thread 0 (launches of vertex ranges)
     scratch: wp.array2d(dtype=wp.float32),  # Temp: (V, order^2) basis row per thread
     out: wp.array2d(dtype=wp.float32),  # Out: (V, order^2) += sum_r w max(n.s_r, 0) V(s_r) y_i(s_r)
 ):
-    v = wp.tid()
+    v = first + wp.tid()
     p = points[v]
     n = normals[v]
     q = vertex_rotation(seed, v, rotate)
@@ -95,10 +96,11 @@ def diffuse_bounce(
     seed: int,  # In: seed of the per-vertex rotations
     offset: float,  # In: ray origin offset along the normal
     max_dist: float,  # In: ray length
+    first: int,  # In: vertex of thread 0 (launches of vertex ranges)
     previous: wp.array2d(dtype=wp.float32),  # In: (V, K) the previous pass' transfer (albedo included)
     out: wp.array2d(dtype=wp.float32),  # Out: (V, K) += sum_r w max(n.s_r, 0) T_prev(hit_r), front-face hits only
 ):
-    v = wp.tid()
+    v = first + wp.tid()
     p = points[v]
     n = normals[v]
     q = vertex_rotation(seed, v, rotate)
@@ -141,10 +143,11 @@ def glossy_transfer(
     offset: float,  # In: ray origin offset along the normal
     mode: int,  # In: GLOSSY_NONE, GLOSSY_HEMISPHERE or GLOSSY_SHADOWED
     max_dist: float,  # In: ray length
+    first: int,  # In: row of thread 0 (launches of row ranges)
     scratch: wp.array2d(dtype=wp.float32),  # Temp: (G, max(order_out, order_in)^2) basis row per thread
     out: wp.array3d(dtype=wp.float32),  # Out: (G, order_out^2, order_in^2) += sum_r w V(s_r) y_i(s_r) y_j(s_r)
 ):
-    k = wp.tid()
+    k = first + wp.tid()
     v = ids[k]
     p = points[v]
     n = normals[v]

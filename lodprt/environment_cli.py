@@ -53,6 +53,7 @@ def add_parsers(sub) -> None:
                     help="level of detail: build the vertex hierarchy and store transfer vectors only where they differ "
                     "by more than E (relative) across a node's leaves; the rest are completed on reading (T-15)")
     be.add_argument("--device", default=None, metavar="DEV", help="Warp device: cpu, cuda, cuda:N")
+    be.add_argument("--jobs", type=int, default=None, metavar="J", help="CPU threads launching vertex ranges (default: all cores)")
     be.add_argument("--overwrite", action="store_true", help="replace OUT if it is an existing transfer store")
 
     re = sub.add_parser(
@@ -112,6 +113,8 @@ def _cmd_bake_environment(args) -> int:
     from lodprt.scene import load_scene
     from lodprt.transfer import bake_transfer
 
+    if args.jobs is not None and args.jobs < 1:
+        raise LodprtError(f"--jobs {args.jobs}: must be >= 1")
     device = resolve_device(args.device)
     env = load_environment(args.environment) if args.environment else None
     scene = load_scene(args.scene)
@@ -128,7 +131,8 @@ def _cmd_bake_environment(args) -> int:
         res = bake_transfer(scene, args.out, order=args.sh_order, mode=args.transfer, rays=args.rays,
                             bounces=args.bounces, threshold=args.bounce_threshold, glossy=not args.no_glossy,
                             glossy_order=args.glossy_order, rotate=args.rotate_rays, environment=env, device=device,
-                            lod_threshold=args.lod_threshold, overwrite=args.overwrite, progress=progress)
+                            lod_threshold=args.lod_threshold, overwrite=args.overwrite, progress=progress,
+                            jobs=args.jobs)
     finally:
         if bar is not None:
             bar.close()

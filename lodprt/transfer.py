@@ -132,16 +132,40 @@ class Geometry:
         return 4.0 * float(np.linalg.norm(self.positions.max(0) - self.positions.min(0))) + 1.0
 
 
+def _launch_ranges(kernel, n: int, device: str, inputs_for, jobs: int | None) -> None:
+    """Launch ``kernel`` over items 0..n-1 in ``jobs`` contiguous ranges, one Python thread each on the CPU (a CPU
+    launch runs on one thread but releases the GIL); ``inputs_for(first)`` gives the inputs of the range starting
+    at ``first``; ranges write disjoint rows. One launch on CUDA devices."""
+    wp = warp()
+    jobs = (os.cpu_count() or 1) if jobs is None else max(1, int(jobs))
+    if not device.startswith("cpu") or jobs == 1 or n < 2 * jobs:
+        if n:
+            wp.launch(kernel, dim=n, device=device, inputs=inputs_for(0))
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    edges = np.linspace(0, n, jobs + 1).astype(int)
+
+    def run(k):
+        a, b = int(edges[k]), int(edges[k + 1])
+        if b > a:
+            wp.launch(kernel, dim=b - a, device=device, inputs=inputs_for(a))
+
+    with ThreadPoolExecutor(jobs) as pool:
+        list(pool.map(run, range(jobs)))
+
+
 def _dirs(rays: int, device: str):
     wp = warp()
     return wp.array(fibonacci_directions(rays).astype(np.float32), dtype=wp.vec3, device=device)
 
 
 def geometric_transfer(geom: Geometry, *, order: int, rays: int = 256, shadowed: bool = True, rotate: bool = False,
-                       seed: int = 0) -> np.ndarray:
+                       seed: int = 0, jobs: int | None = None) -> np.ndarray:
     """integral max(n.s, 0) V(s) y_i(s) ds per vertex by rays (no albedo): (V, order^2) float32.
 
-    ``shadowed=False`` drops V (the quadrature of the unshadowed transfer).
+    ``shadowed=False`` drops V (the quadrature of the unshadowed transfer). ``jobs``: CPU threads (default: all
+    cores); the result does not depend on it.
     """
     from lodprt.kernels import transfer as ktr
 
@@ -150,9 +174,10 @@ def geometric_transfer(geom: Geometry, *, order: int, rays: int = 256, shadowed:
     n = len(geom.positions)
     out = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
     scratch = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
-    wp.launch(ktr.diffuse_direct, dim=n, device=geom.device,
-              inputs=[mesh.id, pts, nrm, _dirs(rays, geom.device), int(rotate), int(seed), int(order), float(geom.offset),
-                      int(shadowed), geom.max_dist, scratch], outputs=[out])
+    dirs = _dirs(rays, geom.device)
+    _launch_ranges(ktr.diffuse_direct, n, geom.device, lambda first: [
+        mesh.id, pts, nrm, dirs, int(rotate), int(seed), int(order), float(geom.offset), int(shadowed), geom.max_dist,
+        int(first), scratch, out], jobs)
     return out.numpy()
 
 
@@ -198,12 +223,12 @@ class DiffuseTransfer:
 
 def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", rays: int = 256, bounces: int = 4,
                      threshold: float = 1e-3, rotate: bool = False, seed: int = 0, keep_passes: bool = False,
-                     progress=None) -> DiffuseTransfer:
+                     progress=None, jobs: int | None = None) -> DiffuseTransfer:
     """Per-vertex diffuse transfer vectors (P-10 and the interreflection passes; module docstring).
 
     ``mode``: unshadowed (closed form), shadowed or interreflected (``bounces`` passes at most after the direct
     one, stopping once a pass' energy is below ``threshold`` times the direct energy). ``progress(done, total)``
-    is called after each pass.
+    is called after each pass; ``jobs`` CPU threads launch vertex ranges (default: all cores).
     """
     if mode not in MODES:
         raise LodprtError(f"transfer mode {mode!r}: choose one of {', '.join(MODES)}")
@@ -219,7 +244,7 @@ def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", 
     if mode == "unshadowed":
         g = unshadowed_transfer_closed_form(geom, order=order)
     else:
-        g = geometric_transfer(geom, order=order, rays=rays, shadowed=True, rotate=rotate, seed=seed)
+        g = geometric_transfer(geom, order=order, rays=rays, shadowed=True, rotate=rotate, seed=seed, jobs=jobs)
     cur = (scale * g[:, None, :]).astype(np.float32)
     cur[~geom.referenced] = 0
     total = cur.astype(np.float64)
@@ -235,9 +260,9 @@ def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", 
         for b in range(bounces):
             prev = wp.array(cur.reshape(n, k), dtype=wp.float32, device=geom.device)
             out = wp.zeros((n, k), dtype=wp.float32, device=geom.device)
-            wp.launch(ktr.diffuse_bounce, dim=n, device=geom.device,
-                      inputs=[mesh.id, pts, nrm, faces2d, dirs, int(rotate), int(seed) + b + 1, float(geom.offset),
-                              geom.max_dist, prev], outputs=[out])
+            _launch_ranges(ktr.diffuse_bounce, n, geom.device, lambda first: [
+                mesh.id, pts, nrm, faces2d, dirs, int(rotate), int(seed) + b + 1, float(geom.offset), geom.max_dist,
+                int(first), prev, out], jobs)
             cur = (scale * out.numpy().reshape(n, 3, order * order)).astype(np.float32)
             cur[~geom.referenced] = 0
             total += cur
@@ -254,7 +279,8 @@ def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", 
 
 
 def glossy_transfer(geom: Geometry, ids=None, *, order: int = 3, lighting_order: int | None = None, rays: int = 256,
-                    mode: str = "shadowed", rotate: bool = False, seed: int = 0, chunk: int = 1 << 14) -> np.ndarray:
+                    mode: str = "shadowed", rotate: bool = False, seed: int = 0, chunk: int = 1 << 14,
+                    jobs: int | None = None) -> np.ndarray:
     """Glossy transfer matrices M_ij = integral V(s) H(n.s) y_i(s) y_j(s) ds (P-11) for vertices ``ids``.
 
     Returns (G, order^2, lighting_order^2) float32 (square unless ``lighting_order`` differs). ``mode``:
@@ -280,10 +306,10 @@ def glossy_transfer(geom: Geometry, ids=None, *, order: int = 3, lighting_order:
         sub = ids[s : s + chunk]
         res = wp.zeros((len(sub), no, ni), dtype=wp.float32, device=geom.device)
         scratch = wp.zeros((len(sub), big), dtype=wp.float32, device=geom.device)
-        wp.launch(ktr.glossy_transfer, dim=len(sub), device=geom.device,
-                  inputs=[mesh.id, pts, nrm, wp.array(sub, dtype=wp.int32, device=geom.device), dirs, int(rotate),
-                          int(seed), int(order), int(lighting_order), float(geom.offset), GLOSSY_MODES[mode],
-                          geom.max_dist, scratch], outputs=[res])
+        wsub = wp.array(sub, dtype=wp.int32, device=geom.device)
+        _launch_ranges(ktr.glossy_transfer, len(sub), geom.device, lambda first: [
+            mesh.id, pts, nrm, wsub, dirs, int(rotate), int(seed), int(order), int(lighting_order), float(geom.offset),
+            GLOSSY_MODES[mode], geom.max_dist, int(first), scratch, res], jobs)
         out[s : s + len(sub)] = res.numpy()
     return out
 
@@ -376,7 +402,7 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
                   threshold: float = 1e-3, glossy: bool = True, glossy_order: int | None = None,
                   glossy_mode: str = "shadowed", rotate: bool = False, seed: int = 0, environment=None,
                   lod_threshold: float | None = None, tree=None, device: str | None = None, overwrite: bool = False,
-                  progress=None) -> TransferBake:
+                  progress=None, jobs: int | None = None) -> TransferBake:
     """Bake diffuse transfer vectors for every vertex and glossy matrices for vertices whose material has ks > 0.
 
     Writes a ``lodprt-transfer`` store (docs/FORMAT.md, "Environment transfer store") to ``out`` unless it is
@@ -394,12 +420,12 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     t0 = time.perf_counter()
     geom = Geometry.from_scene(scene, device=device)
     diffuse = diffuse_transfer(geom, order=order, mode=mode, rays=rays, bounces=bounces, threshold=threshold,
-                               rotate=rotate, seed=seed, progress=progress)
+                               rotate=rotate, seed=seed, progress=progress, jobs=jobs)
     ks = np.array([m.ks for m in scene.materials])
     gids = np.nonzero(geom.referenced & (ks[scene.material_id] > 0))[0].astype(np.int32) if glossy else np.zeros(0, np.int32)
     gorder = glossy_order or order
     gmat = glossy_transfer(geom, gids, order=gorder, lighting_order=order, rays=rays, mode=glossy_mode,
-                           rotate=rotate, seed=seed) if len(gids) else None
+                           rotate=rotate, seed=seed, jobs=jobs) if len(gids) else None
     cut_nodes = None
     hierarchy_seconds = None
     if lod_threshold is not None:

@@ -110,6 +110,18 @@ def test_shadowed_plane_under_occluder_matches_embree(device):
     assert got[centre, 0] < 0.6 * unshadowed[centre, 0]  # the occluder does shadow the plane's centre
 
 
+def test_threaded_launches_give_the_same_transfer(device):
+    """Launching vertex ranges from 1 or 3 threads gives bit-identical interreflected transfer and glossy matrices."""
+    pos, faces, normals = plane_under_occluder()
+    g = T.Geometry.from_arrays(pos, faces, normals, 0.5, device=device)
+    a = T.diffuse_transfer(g, order=2, mode="interreflected", rays=64, bounces=1, jobs=1).transfer
+    b = T.diffuse_transfer(g, order=2, mode="interreflected", rays=64, bounces=1, jobs=3).transfer
+    assert np.array_equal(a, b)
+    ga = T.glossy_transfer(g, np.arange(20), order=2, rays=64, jobs=1)
+    gb = T.glossy_transfer(g, np.arange(20), order=2, rays=64, jobs=3)
+    assert np.array_equal(ga, gb)
+
+
 def test_closest_hit_barycentrics_reconstruct_the_hit_point(device):
     """The bounce kernel's barycentric weights (u, v, 1-u-v) of the hit triangle's vertices give the hit point."""
     pos, faces, normals = plane_under_occluder()
