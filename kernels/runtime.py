@@ -12,10 +12,16 @@ from lodprt.kernels.sh import sh_basis
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func
+def display(x: float):
+    """clip(x, 0, 1): the screen intensity of a radiance in units of the white point (thesis 3.4.2.2)."""
+    return wp.clamp(x, 0.0, 1.0)
+
+
 @wp.kernel
 def view_errors(
     nodes: wp.array(dtype=wp.int32),  # In: (K,) internal nodes to evaluate
-    first_internal: int,  # In: V, the id of the first internal node (row 0 of width)
+    first_internal: int,  # In: V, the id of the first internal node (row 0 of the boxes)
     node_pos: wp.array(dtype=wp.vec3),  # In: (N,) position of each node's vertex
     node_collapsed: wp.array(dtype=wp.vec3),  # In: (N,) position p of the vertex each node's collapse removed
     error_vector: wp.array(dtype=wp.vec3),  # In: (N,) p - p' (figure 10)
@@ -30,9 +36,9 @@ def view_errors(
     diag: float,  # In: screen diagonal in pixels
     used: wp.array(dtype=wp.int32),  # In: (U,) light samples with a non-zero weight
     weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample (T-12, intensities)
-    width: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient spread over each node's leaves
+    box_centre: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box centre / white per node
+    box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
     order: int,  # In: SH bands
-    white: float,  # In: radiance shown as 1.0
     alpha: float,  # In: weight of e_geo (T-14)
     basis: wp.array2d(dtype=wp.float32),  # Scratch: (K, ncoef)
     culled: wp.array(dtype=wp.uint8),  # Out: (K,) 1 when back-facing (T-13) or outside the frustum
@@ -71,31 +77,37 @@ def view_errors(
         dx = (ca[0] / ca[3] - cb[0] / cb[3]) * half_w
         dy = (ca[1] / ca[3] - cb[1] / cb[3]) * half_h
         g = wp.min(wp.sqrt(dx * dx + dy * dy) / diag, 1.0)
-    # e_lumi: bound on the spread of the leaf radiances toward the eye
+    # e_lumi: the display spread of the interval that holds the leaves' radiance toward the eye
     sh_basis(vh, order, basis, k)
     ncoef = order * order
     row = node - first_internal
-    channels = width.shape[2]
+    channels = box_centre.shape[2]
+    hr = float(0.0)
+    hg = float(0.0)
+    hb = float(0.0)
     lr = float(0.0)
     lg = float(0.0)
     lb = float(0.0)
     for u in range(used.shape[0]):
         j = used[u]
         for c in range(channels):
-            s = float(0.0)
+            mid = float(0.0)
+            rad = float(0.0)
             for i in range(ncoef):
-                s += wp.float32(width[row, j, c, i]) * wp.abs(basis[k, i])
-            if channels == 1:
-                lr += s * weights[j, 0]
-                lg += s * weights[j, 1]
-                lb += s * weights[j, 2]
-            elif c == 0:
-                lr += s * weights[j, 0]
-            elif c == 1:
-                lg += s * weights[j, 1]
-            else:
-                lb += s * weights[j, 2]
-    lum = wp.min(wp.max(wp.max(wp.abs(lr), wp.abs(lg)), wp.abs(lb)) / white, 1.0)
+                y = basis[k, i]
+                mid += wp.float32(box_centre[row, j, c, i]) * y
+                rad += wp.float32(box_half[row, j, c, i]) * wp.abs(y)
+            if channels == 1 or c == 0:
+                hr += (mid + rad) * weights[j, 0]
+                lr += (mid - rad) * weights[j, 0]
+            if channels == 1 or c == 1:
+                hg += (mid + rad) * weights[j, 1]
+                lg += (mid - rad) * weights[j, 1]
+            if channels == 1 or c == 2:
+                hb += (mid + rad) * weights[j, 2]
+                lb += (mid - rad) * weights[j, 2]
+    lum = wp.max(wp.max(display(hr) - display(lr), display(hg) - display(lg)), display(hb) - display(lb))
+    lum = wp.clamp(lum, 0.0, 1.0)
     e_geo[k] = g
     e_lumi[k] = lum
     err[k] = alpha * g + (1.0 - alpha) * lum

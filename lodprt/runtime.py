@@ -25,12 +25,13 @@ What a frame does (docs/RUNTIME.md has the full story):
 
 Errors (T-14): ``e_geo`` is the screen-space length of the node's error vector ``p - p'`` (both ends projected
 with the camera; an end behind the eye counts as 1) over the screen diagonal, clamped to [0, 1]. ``e_lumi`` is the
-spread (max - min) of the leaf radiances under the node for the current view and lights, over the display white
-``white`` (radiance shown as 1.0), clamped to [0, 1]. It is bounded from per-node data made once: for each light
-sample the width ``max - min`` over the node's leaves of every SH coefficient, so that
-``max_c sum_j W[j, c] sum_i width_jci |y_i(v)|`` (``v`` the direction from the node to the eye) is at least the
-true spread of any interpolated light toward ``v`` (the coefficient box of a weighted sum lies inside the
-weighted sum of the boxes). It costs O(samples x coefficients) per candidate instead of a pass over the leaves.
+spread (max - min) of the leaf radiances under the node for the current view and lights as the thesis counts
+screen intensities (3.4.2.2: in units of the white ``white``, clipped to [0, 1]): ``display(L) = clip(L / white,
+0, 1)``. It is bounded from per-node data made once: for each light sample the box (centre and half-width over the
+node's leaves) of every SH coefficient, so that the leaves' radiance toward ``v`` (the direction from the node to
+the eye) lies in ``[lo, hi] = sum_j W[j, c] sum_i (centre_jci y_i(v) -+ half_jci |y_i(v)|)`` for any light
+interpolated from those samples (weights >= 0), and ``e_lumi = max_c display(hi_c) - display(lo_c)`` is at least
+the true spread toward ``v``. It costs O(samples x coefficients) per candidate instead of a pass over the leaves.
 """
 
 from __future__ import annotations
@@ -104,6 +105,12 @@ class Frame:
     light_colors: np.ndarray
     camera: Camera
     stats: dict
+
+
+def display(radiance_over_white):
+    """The screen intensity of a radiance in units of the white point as the thesis counts it (3.4.2.2): values
+    above 1 show as 1, below 0 as 0, i.e. clip(x, 0, 1) (linear: no display gamma)."""
+    return np.clip(np.asarray(radiance_over_white, np.float64), 0.0, 1.0)
 
 
 def clip_planes(view_proj: np.ndarray) -> np.ndarray:
@@ -195,10 +202,10 @@ class Runtime:
                 progress(k + 1, S)
         self.channels = self.coeffs.shape[2]
         self.ncoef = self.coeffs.shape[3]
-        self.width = self._coefficient_widths()
         self.white = float(white) if white is not None else self._default_white()
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
+        self.box_centre, self.box_half = self._coefficient_boxes()
         # per-node geometry for the error terms
         self.node_pos = self.positions[h.vertex]
         internal = h.children[:, 1] >= 0
@@ -227,32 +234,35 @@ class Runtime:
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
     # -- set-up ------------------------------------------------------------------------------------------------
-    def _coefficient_widths(self) -> np.ndarray:
-        """(N - V, S, C, ncoef) float16: per light sample, max - min over each internal node's leaves of every
-        completed coefficient, bottom-up one height level at a time (children always sit on lower levels)."""
+    def _coefficient_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per light sample, the box of every completed coefficient over each internal node's leaves, in units of
+        ``white``: centre and half-width, each (N - V, S, C, ncoef) float16 (clipped to float16's range), made
+        bottom-up one height level at a time (children always sit on lower levels)."""
         from lodprt.hierarchy import node_heights
 
         h = self.h
         V, N = h.num_vertices, h.num_nodes
         _, S, C, n = self.coeffs.shape
-        out = np.zeros((N - V, S, C, n), np.float16)
+        centre = np.zeros((N - V, S, C, n), np.float16)
+        half = np.zeros((N - V, S, C, n), np.float16)
         if N == V:
-            return out
+            return centre, half
         hk = node_heights(h)
         order = np.argsort(hk, kind="stable")
         bounds = np.searchsorted(hk[order], np.arange(1, hk.max() + 2))
         levels = [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
         c0, c1 = h.children[:, 0], h.children[:, 1]
+        big = float(np.finfo(np.float16).max)
         for j in range(S):
             mn = np.empty((N, C * n), np.float32)
-            mn[:V] = self.coeffs[:, j].reshape(V, C * n)
+            mn[:V] = self.coeffs[:, j].reshape(V, C * n) / np.float32(self.white)
             mx = mn.copy()
             for nodes in levels:
                 mn[nodes] = np.minimum(mn[c0[nodes]], mn[c1[nodes]])
                 mx[nodes] = np.maximum(mx[c0[nodes]], mx[c1[nodes]])
-            w = mx[V:] - mn[V:]
-            out[:, j] = np.minimum(w, np.finfo(np.float16).max).reshape(N - V, C, n)
-        return out
+            centre[:, j] = np.clip(0.5 * (mx[V:] + mn[V:]), -big, big).reshape(N - V, C, n)
+            half[:, j] = np.clip(0.5 * (mx[V:] - mn[V:]), 0, big).reshape(N - V, C, n)
+        return centre, half
 
     def _upload(self) -> None:
         """The per-frame kernels' read-only inputs, on the device once."""
@@ -267,7 +277,8 @@ class Runtime:
             "node_pos": v3(self.node_pos), "node_collapsed": v3(self.node_collapsed),
             "error_vector": v3(self.error_vector), "axis": v3(self.axis), "half": f1(self.half),
             "radius": f1(self.radius), "positions": v3(self.positions), "normals": v3(self.normals),
-            "width": wp.array(self.width, dtype=wp.float16, device=dev),
+            "box_centre": wp.array(self.box_centre, dtype=wp.float16, device=dev),
+            "box_half": wp.array(self.box_half, dtype=wp.float16, device=dev),
             "coeffs": wp.array(self.coeffs, dtype=wp.float32, device=dev),
         }
 
@@ -364,8 +375,8 @@ class Runtime:
                 d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self._planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self._vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
-                0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), used, weights, d["width"],
-                self.order, self.white, self.alpha, wp.empty((K, self.order * self.order), dtype=wp.float32, device=dev),
+                0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), used, weights,
+                d["box_centre"], d["box_half"], self.order, self.alpha, wp.empty((K, self.order * self.order), dtype=wp.float32, device=dev),
             ], outputs=outs)
         culled, err, geo, lumi = (o.numpy() for o in outs)
         return culled.astype(bool), err.astype(np.float64), geo.astype(np.float64), lumi.astype(np.float64)
@@ -402,14 +413,18 @@ class Runtime:
         sb = cb[:, :2] / np.where(behind, 1.0, cb[:, 3])[:, None] * half_wh
         e_geo = np.where(behind, 1.0, np.linalg.norm(sa - sb, axis=1) / math.hypot(cam.width, cam.height))
         e_geo = np.clip(e_geo, 0.0, 1.0)
-        # e_lumi: bound on the spread of the leaf radiances toward the eye
-        yabs = np.abs(sh.basis(vh, self.order)).astype(np.float32)
-        acc = np.zeros((len(nodes), 3))
+        # e_lumi: display-space spread bounded by the interval of the leaves' radiance toward the eye
+        y = sh.basis(vh, self.order)
+        hi = np.zeros((len(nodes), 3))
+        lo = np.zeros((len(nodes), 3))
         internal = nodes - self.h.num_vertices
         for j in self._used:
-            wj = (self.width[internal, j].astype(np.float32) * yabs[:, None, :]).sum(-1)  # (K, C)
-            acc += wj * self.sample_weights[j][None, :]  # C = 1 (grey) broadcasts over R, G, B
-        e_lumi = np.clip(np.abs(acc).max(1) / self.white, 0.0, 1.0)
+            mid = (self.box_centre[internal, j].astype(np.float64) * y[:, None, :]).sum(-1)  # (K, C)
+            rad = (self.box_half[internal, j].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1)
+            w = self.sample_weights[j][None, :]  # C = 1 (grey) broadcasts over R, G, B
+            hi += (mid + rad) * w
+            lo += (mid - rad) * w
+        e_lumi = np.clip((display(hi) - display(lo)).max(1), 0.0, 1.0)
         err = self.alpha * e_geo + (1.0 - self.alpha) * e_lumi
         return culled, err, e_geo, e_lumi
 
@@ -450,16 +465,11 @@ class Runtime:
         split = rc[want_refine]
         split = split[np.argsort(-err[:k][want_refine], kind="stable")]
         split = split[cut.active[split]]
-        touched += len(split)
-        if len(split):
-            done = cut.refine_many(split)
-            refined += int(done.sum())
-            for node in split[~done]:  # blocked splits: forced refinement of what they need, one by one
-                node = int(node)
-                if cut.active[node]:
-                    n = cut.force_refine(node)
-                    refined += n
-                    touched += n
+        touched += len(split)  # (refine_many skips nodes no longer active)
+        if len(split):  # allowed splits at once; blocked ones forced, their blockers split first (all at once)
+            n = cut.force_refine_many(split)
+            refined += n
+            touched += max(n - len(split), 0)
         return refined, coarsened, touched
 
     def update(self, *, max_passes: int | None = None) -> Frame:
