@@ -167,7 +167,7 @@ class Runtime:
     """
 
     def __init__(self, store, *, error_bound: float = 0.25, alpha: float = 0.6, triangle_budget: int | None = None,
-                 white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 4,
+                 white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 2,
                  lod: bool = True, device: str | None = None, progress=None):
         from lodprt.devices import resolve_device
 
