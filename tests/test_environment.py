@@ -248,3 +248,17 @@ def test_public_api_names():
     assert lodprt.load_environment is E.load_environment and lodprt.Environment is E.Environment
     for name in ("bake_transfer", "open_transfer", "relit_radiance"):
         assert callable(getattr(lodprt, name)) and name in lodprt.__all__
+
+
+def test_order6_on_a_16x16_cube_beats_the_patent_figure():
+    """Random order-6 signals sampled on a 6x16x16 cube project back with squared error well under the patent's
+    0.2% mean / 0.5% worst (measured about 4e-5)."""
+    rng = np.random.default_rng(0)
+    d = E.texel_directions("cube", 16)
+    errs = []
+    for _ in range(10):
+        c = rng.normal(size=36)
+        env = E.Environment("cube", np.repeat(sh.evaluate(c, d)[:, None], 3, 1).reshape(6, 16, 16, 3), "signal")
+        got = env.radiance().T @ E.projection_weights("cube", 16, 6)
+        errs.append(np.sum((got[0] - c) ** 2) / np.sum(c**2))
+    assert np.mean(errs) < 2e-4 and np.max(errs) < 5e-4
