@@ -534,24 +534,12 @@ class Renderer:
 # Full-resolution frames straight from a store ("LOD off"): every referenced vertex, no view cut.
 
 
-def light_weights(samples, light) -> tuple[np.ndarray, np.ndarray]:
-    """T-12: the (up to) 8 nearest light samples of ``light`` and weights (1 - d_j / r)^4 normalised to sum 1,
-    r the largest of those distances; a light on a sample, or a single sample, gets weight 1 there."""
-    samples = np.asarray(samples, np.float64)
-    d = np.linalg.norm(samples - np.asarray(light, np.float64)[None, :], axis=1)
-    idx = np.argsort(d, kind="stable")[:8]
-    r = d[idx].max()
-    w = (1.0 - d[idx] / r) ** 4 if r > 0 else np.ones(len(idx))
-    if w.sum() <= 0:
-        w = (d[idx] == d[idx].min()).astype(np.float64)
-    return idx, w / w.sum()
-
-
 def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = None):
     """A ``lodprt.runtime.Frame`` with every referenced vertex of ``store`` and its completed coefficients.
 
     Either ``sample`` (one light exactly at light sample K, that sample's coefficients) or ``lights`` (L, 3)
-    positions, each interpolated from its nearest samples (T-12, ``light_weights``). ``colors`` (L, 3) RGB
+    positions, each interpolated from its nearest samples (T-12, ``lodprt.lights.LightInterpolator``: the run
+    time's weights, clamped into the sampled region). ``colors`` (L, 3) RGB
     intensities (default the store's); the frame's coefficients carry them (linear radiance).
     """
     from lodprt.runtime import Frame
@@ -565,7 +553,12 @@ def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = 
         lights = np.asarray(lights, np.float64).reshape(-1, 3)
         if not len(lights) or not np.isfinite(lights).all():
             raise LodprtError(f"lights: expected (L, 3) finite positions, L >= 1, got {lights.tolist()}")
-        mixes = [light_weights(store.light_positions, p) for p in lights]
+        from lodprt.lights import LightInterpolator
+
+        interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"])
+        idx, w, _ = interp.weights(lights)
+        lights = interp.clamp(lights)[0]
+        mixes = list(zip(idx, w))
     colors = np.broadcast_to(store.intensity if colors is None else np.asarray(colors, np.float64),
                              lights.shape).astype(np.float64)
     faces = store.faces

@@ -68,7 +68,7 @@ def test_tone_map_srgb():
 # Frames: the SH renderer against CPU ray casting of the same frame
 
 from lodprt import sh  # noqa: E402
-from lodprt.render import Renderer, camera_matrices, full_frame, light_weights  # noqa: E402
+from lodprt.render import Renderer, camera_matrices, full_frame  # noqa: E402
 from lodprt.runtime import Camera, Frame  # noqa: E402
 
 trimesh = pytest.importorskip("trimesh")
@@ -272,16 +272,6 @@ def test_bad_frames_are_clear_errors(renderer):
         renderer.image(Frame(triangles=np.array([[0, 1, 2]], np.int32), coefficients=np.ones((3, 3, 81), np.float32), **base))
     with pytest.raises(LodprtError, match="triangles"):
         renderer.image(Frame(triangles=np.array([[0, 1, 3]], np.int32), coefficients=np.ones((3, 3, 4), np.float32), **base))
-
-
-def test_light_weights_t12():
-    """T-12: eight nearest samples, (1 - d/r)^4 normalised; a light on a lone sample gets weight 1."""
-    grid = np.stack(np.meshgrid(*[np.arange(3.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    idx, w = light_weights(grid, (0.9, 1.2, 1.0))
-    d = np.linalg.norm(grid[idx] - [0.9, 1.2, 1.0], axis=1)
-    assert len(idx) == 8 and np.isclose(w.sum(), 1) and np.all(np.diff(d) >= 0)
-    np.testing.assert_allclose(w, (1 - d / d.max()) ** 4 / ((1 - d / d.max()) ** 4).sum())
-    assert light_weights(grid[:1], (5.0, 5.0, 5.0))[1].tolist() == [1.0]
 
 
 # ---------------------------------------------------------------------------------------------------------------
