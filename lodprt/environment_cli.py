@@ -86,7 +86,8 @@ def _cmd_irradiance(args) -> int:
         env = env.mip(args.mip)
     coeffs = irr.lighting_coefficients(env)
     doc = irr.describe(coeffs)
-    doc["environment"] = {"source": env.source, "kind": env.kind, "shape": list(env.data.shape[:-1])}
+    doc["environment"] = {"source": env.source, "kind": env.kind, "shape": list(env.data.shape[:-1]),
+                          "mip_level": args.mip}
     if args.json:
         print(json.dumps(doc, indent=2))
         return 0
@@ -102,6 +103,11 @@ def _cmd_irradiance(args) -> int:
     print("shader registers (vec4 x y z w):")
     for k, v in doc["registers"].items():
         print(f"  {k:>4} " + "".join(f"{x:12.6f}" for x in v))
+    lo, hi = doc["irradiance_min"], doc["irradiance_max"]
+    print("E(n) over the sphere: " + ", ".join(f"{c} [{a:.6g}, {b:.6g}]" for c, a, b in zip("rgb", lo, hi)))
+    if min(lo) < 0:
+        print("warning: negative irradiance somewhere (ringing of the 9-coefficient expansion of a sharp light)",
+              file=sys.stderr)
     return 0
 
 

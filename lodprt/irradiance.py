@@ -165,11 +165,30 @@ def brute_force_irradiance(env, normals, *, chunk: int = 256) -> np.ndarray:
     return out
 
 
+def irradiance_range(coeffs, *, samples: int = 20000) -> tuple[np.ndarray, np.ndarray]:
+    """Per channel (min, max) of E(n) over ``samples`` spherical-Fibonacci normals.
+
+    A negative minimum is ringing of the truncated expansion: a single directional light gives -3.7% of the
+    maximum (the 3-band clamped cosine dips below zero at cos = -8/15). It is reported, never clamped; windowing
+    the bands (``lodprt.sh.window``) does not help at 3 bands (Hann -6.7%, Lanczos -4.3% of the maximum).
+    """
+    k = np.arange(samples) + 0.5
+    z = 1 - 2 * k / samples
+    phi = np.pi * (1 + 5**0.5) * k
+    r = np.sqrt(1 - z * z)
+    e = irradiance(np.stack([r * np.cos(phi), r * np.sin(phi), z], 1), coeffs)
+    return e.min(0), e.max(0)
+
+
 def describe(coeffs) -> dict:
-    """Everything ``lodprt irradiance`` prints: coefficients, A_l, constants, matrices, registers (JSON-ready)."""
+    """Everything ``lodprt irradiance`` prints: coefficients, A_l, constants, matrices, registers, the range of E
+    over the sphere (JSON-ready)."""
     L = _check9(coeffs)
     names = [f"L{l}{m}" for l in range(3) for m in range(-l, l + 1)]
+    lo, hi = irradiance_range(L)
     return {
+        "irradiance_min": lo.tolist(),
+        "irradiance_max": hi.tolist(),
         "convention": "real orthonormal SH, index l*(l+1)+m, no Condon-Shortley phase, y_1 = sqrt(3/4pi) (y, z, x); "
         "E(n) = n^T M n with n = (x, y, z, 1); outgoing radiance of albedo kd is kd E / pi; linear RGB",
         "coefficient_names": names,

@@ -132,3 +132,19 @@ def test_irradiance_cli_text_and_error(capsys, tmp_path):
     np.save(tmp_path / "bad.npy", np.ones((4, 4, 3)))
     assert main(["irradiance", str(tmp_path / "bad.npy")]) == 2
     assert "bad.npy: a lat-long map must" in capsys.readouterr().err
+
+
+def test_ringing_of_a_directional_light_is_reported(capsys, tmp_path):
+    """A single tiny bright spot rings to about -3.7% of the maximum with 9 coefficients (the 3-band clamped cosine's
+    dip at cos = -8/15); irradiance_range and the CLI report it, nothing is clamped."""
+    from lodprt.cli import main
+
+    d = E.texel_directions("latlong", 64)
+    spot = np.exp((d @ [0.0, 1.0, 0.0] - 1) / 0.0005)
+    np.save(tmp_path / "spot.npy", np.repeat(spot[:, None], 3, 1).reshape(64, 128, 3))
+    L = I.lighting_coefficients(E.load_environment(tmp_path / "spot.npy"))
+    lo, hi = I.irradiance_range(L)
+    dip = (0.25 - 8 / 30 + 5 / 32 * (3 * 64 / 225 - 1)) / 1.0625  # f(c) = 1/4 + c/2 + 5/32 (3c^2 - 1) at -8/15
+    assert np.allclose(lo / hi, dip, rtol=0.05)
+    assert main(["irradiance", str(tmp_path / "spot.npy")]) == 0
+    assert "negative irradiance" in capsys.readouterr().err
