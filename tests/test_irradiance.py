@@ -135,8 +135,7 @@ def test_irradiance_cli_text_and_error(capsys, tmp_path):
 
 
 def test_ringing_of_a_directional_light_is_reported(capsys, tmp_path):
-    """A single tiny bright spot rings to about -3.7% of the maximum with 9 coefficients (the 3-band clamped cosine's
-    dip at cos = -8/15); irradiance_range and the CLI report it, nothing is clamped."""
+    """A directional light's 9-coefficient irradiance dips to -3.7% of its maximum; the range and the CLI report it."""
     from lodprt.cli import main
 
     d = E.texel_directions("latlong", 64)

@@ -157,8 +157,7 @@ def open_box():
 
 
 def test_interreflection_adds_energy_and_converges(device):
-    """In an open box of albedo 0.7 each bounce pass is smaller than the last (<= kd times it), the total grows
-    and stays below the geometric-series bound direct / (1 - kd)."""
+    """In an open box (kd 0.7) each bounce is at most kd times the last; the total grows but stays below direct/(1-kd)."""
     pos, faces, n = open_box()
     kd = 0.7
     g = T.Geometry.from_arrays(pos, faces, n, kd, device=device)
@@ -219,8 +218,7 @@ def test_first_bounce_matches_embree_reference(device):
 
 
 def test_glossy_without_occluder_reproduces_phong_convolution(device):
-    """With no occluder (full sphere) the glossy matrix is the identity and the glossy radiance equals the
-    Phong-lobe convolution of the lighting evaluated in the reflection direction (and its brute-force integral)."""
+    """Unoccluded, the glossy matrix is I and glossy radiance = the Phong-convolved lighting at R (and its integral)."""
     pos = np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, -1]])
     faces = np.array([[0, 1, 2]])
     n = vertex_normals(pos, faces)
@@ -357,8 +355,7 @@ def test_transfer_cut_extremes(ball_lod):
 
 
 def test_transfer_cut_keeps_fewer_vertices_and_completes_close(ball_lod):
-    """A 5% transfer cut keeps about half the vertices (the lit floor collapses) and T-15 completion of the rest
-    relights within 1% RMS of the full transfer (measured 0.56%); a 1% cut keeps more and errs less."""
+    """A 5% transfer cut keeps about half the vertices and T-15 completion relights within 1% RMS; 1% keeps more."""
     scene, t, tree = ball_lod
     L = E.procedural("sky", resolution=16).project(3)
     full = relight.diffuse_radiance(t, L)
