@@ -188,7 +188,7 @@ class Runtime:
         self.lod = bool(lod)
         self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
                                         weighting=weighting, outside=outside)
-        V, N = h.num_vertices, h.num_nodes
+        V = h.num_vertices
         S = store.num_samples
         self.order = store.sh_order
         # T-15 once per sample (cached, SPEC 5), float32, vertex-major (V, S, C, ncoef): a vertex's samples are

@@ -24,18 +24,23 @@ def sample_group(k: int) -> str:
     return f"samples/{k:05d}"
 
 
+def store_format(path: str | os.PathLike) -> str | None:
+    """The ``format`` attribute of the zarr v3 group at ``path`` (None when it is not one)."""
+    try:
+        doc = json.loads((Path(path) / "zarr.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return doc.get("attributes", {}).get("format")
+
+
 def is_store(path: str | os.PathLike) -> bool:
     """True when ``path`` is a zarr v3 group written by lodprt (any version)."""
-    meta = Path(path) / "zarr.json"
-    try:
-        doc = json.loads(meta.read_text())
-    except (OSError, ValueError):
-        return False
-    return doc.get("attributes", {}).get("format") == FORMAT_NAME
+    return store_format(path) == FORMAT_NAME
 
 
-def check_destination(path: str | os.PathLike, *, overwrite: bool) -> None:
-    """Refuse to write over anything, unless ``overwrite`` and the thing there is a lodprt store."""
+def check_destination(path: str | os.PathLike, *, overwrite: bool, format: str = FORMAT_NAME,
+                      what: str = "lodprt store") -> None:
+    """Refuse to write over anything, unless ``overwrite`` and the thing there is a store of ``format``."""
     path = Path(path)
     if not path.exists():
         if not path.parent.exists():
@@ -43,8 +48,8 @@ def check_destination(path: str | os.PathLike, *, overwrite: bool) -> None:
         return
     if not overwrite:
         raise StoreError(f"{path}: already exists; pass --overwrite (overwrite=True) to replace it")
-    if not is_store(path):
-        raise StoreError(f"{path}: exists and is not a lodprt store; refusing to replace it even with --overwrite")
+    if store_format(path) != format:
+        raise StoreError(f"{path}: exists and is not a {what}; refusing to replace it even with --overwrite")
 
 
 class StoreWriter:

@@ -24,7 +24,6 @@ unnormalised). Lighting and transfer are in the world frame (y up).
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import os
 import shutil
@@ -36,6 +35,7 @@ import numpy as np
 from lodprt import sh
 from lodprt.devices import resolve_device, warp
 from lodprt.errors import LodprtError, StoreError
+from lodprt.store import check_destination, store_format
 
 log = logging.getLogger(__name__)
 
@@ -519,22 +519,11 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
 
 
 def is_transfer_store(path) -> bool:
-    try:
-        doc = json.loads((Path(path) / "zarr.json").read_text())
-    except (OSError, ValueError):
-        return False
-    return doc.get("attributes", {}).get("format") == TRANSFER_FORMAT
+    return store_format(path) == TRANSFER_FORMAT
 
 
 def _check_destination(path: Path, *, overwrite: bool) -> None:
-    if not path.exists():
-        if not path.parent.exists():
-            raise StoreError(f"{path}: the folder {path.parent} does not exist")
-        return
-    if not overwrite:
-        raise StoreError(f"{path}: already exists; pass --overwrite (overwrite=True) to replace it")
-    if not is_transfer_store(path):
-        raise StoreError(f"{path}: exists and is not a lodprt transfer store; refusing to replace it even with --overwrite")
+    check_destination(path, overwrite=overwrite, format=TRANSFER_FORMAT, what="lodprt transfer store")
 
 
 class TransferStore:
