@@ -20,6 +20,7 @@ def display(x: float):
 
 @wp.kernel
 def view_errors(
+    offset: int,  # In: first row of this launch (a launch may cover a slice of the rows)
     nodes: wp.array(dtype=wp.int32),  # In: (K,) internal nodes to evaluate
     first_internal: int,  # In: V, the id of the first internal node (row 0 of the boxes)
     node_pos: wp.array(dtype=wp.vec3),  # In: (N,) position of each node's vertex
@@ -46,7 +47,7 @@ def view_errors(
     e_geo: wp.array(dtype=wp.float32),  # Out: (K,)
     e_lumi: wp.array(dtype=wp.float32),  # Out: (K,)
 ):
-    k = wp.tid()
+    k = wp.tid() + offset
     node = nodes[k]
     p = node_pos[node]
     r = radius[node]
@@ -115,6 +116,7 @@ def view_errors(
 
 @wp.kernel
 def relight(
+    offset: int,  # In: first row of this launch (a launch may cover a slice of the rows)
     vid: wp.array(dtype=wp.int32),  # In: (A,) active vertices
     positions: wp.array(dtype=wp.vec3),  # In: (V,) vertex positions
     normals: wp.array(dtype=wp.vec3),  # In: (V,) vertex normals (view direction for an eye on the vertex)
@@ -127,7 +129,7 @@ def relight(
     out_coeffs: wp.array3d(dtype=wp.float32),  # Out: (A, 3, ncoef) interpolated RGB coefficients
     radiance: wp.array2d(dtype=wp.float32),  # Out: (A, 3) radiance toward the eye (T-7)
 ):
-    k = wp.tid()
+    k = wp.tid() + offset
     v = vid[k]
     dv = eye - positions[v]
     if wp.length(dv) <= 0.0:

@@ -1115,23 +1115,28 @@ class Cut:
         return ok, blocker
 
     def force_refine_many(self, nodes) -> int:
-        """Forced refinement of many active nodes at once (seed 003, table 5.1): rounds of ``refine_many`` over the
-        nodes and, added each round, the active neighbours that block them (created later, so coarser); each round
-        splits at least the latest-created node of its set, whose neighbours are all older. Returns the splits."""
+        """Forced refinement of many active nodes at once (seed 003, table 5.1): rounds that split every node of
+        the set whose split rule holds (as ``refine_many``) and add to the set the active neighbours that block
+        the others (created later, so coarser); each round splits at least the latest-created node of its set,
+        whose neighbours are all older. Returns the number of splits."""
         h = self.h
         want = np.unique(np.asarray(nodes, np.int64))
         want = want[self.active[want] & (h.children[want, 0] >= 0)]
         splits = 0
         while len(want):
-            done = self.refine_many(want)
-            splits += int(done.sum())
-            want = want[~done & self.active[want]]
-            if not len(want):
-                break
             seg, nb = self._edge_segments(want)
             bad = (nb != want[seg]) & (h.creation[nb] > h.creation[want[seg]])
-            want = np.unique(np.concatenate([want, nb[bad]]))
-            if not done.any() and not bad.any():  # cannot happen for a valid cut: fall back to one at a time
+            legal = np.bincount(seg[bad], minlength=len(want)) == 0
+            go = want[legal]
+            if len(go):
+                ch = h.children[go]
+                self.active[go] = False
+                self.active[ch.ravel()] = True
+                self._set_leaves(ch.ravel())
+                splits += len(go)
+            want = np.unique(np.concatenate([want[~legal], nb[bad]]))
+            want = want[self.active[want]]  # a blocker this round split is gone; its children show up next round
+            if not len(go) and not bad.any():  # cannot happen for a valid cut: fall back to one at a time
                 for k in want:
                     splits += self.force_refine(int(k))
                 break

@@ -36,9 +36,11 @@ the true spread toward ``v``. It costs O(samples x coefficients) per candidate i
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import logging
 import math
+import os
 import time
 
 import numpy as np
@@ -270,6 +272,8 @@ class Runtime:
 
         wp = warp()
         dev = self.device
+        self._threads = max(1, min(os.cpu_count() or 1, 8))
+        self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=self._threads) if self._threads > 1 else None
         v3 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.vec3, device=dev)  # noqa: E731
         f1 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.float32, device=dev)  # noqa: E731
         self._wp = wp
@@ -281,6 +285,20 @@ class Runtime:
             "box_half": wp.array(self.box_half, dtype=wp.float16, device=dev),
             "coeffs": wp.array(self.coeffs, dtype=wp.float32, device=dev),
         }
+
+    def _launch(self, kernel, rows: int, inputs: list, outputs: list) -> None:
+        """Launch ``kernel`` over ``rows`` rows; on the CPU, split into one launch per core on threads (Warp runs a
+        CPU launch on one thread and releases the GIL), each launch taking its first row as ``offset``."""
+        wp = self._wp
+        parts = self._threads if self.device == "cpu" and rows >= 2048 else 1
+        if parts == 1:
+            wp.launch(kernel, dim=rows, inputs=[0] + inputs, outputs=outputs, device=self.device)
+            return
+        cuts = np.linspace(0, rows, parts + 1).astype(int)
+        futures = [self._pool.submit(wp.launch, kernel, dim=int(b - a), inputs=[int(a)] + inputs, outputs=outputs,
+                                     device=self.device) for a, b in zip(cuts[:-1], cuts[1:])]
+        for f in futures:
+            f.result()
 
     def _frame_inputs(self) -> tuple:
         wp = self._wp
@@ -370,14 +388,14 @@ class Runtime:
         if K:
             cam = self.camera
             used, weights = self._frame_inputs()
-            wp.launch(kr.view_errors, dim=K, device=dev, inputs=[
+            self._launch(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
                 d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self._planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self._vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), used, weights,
                 d["box_centre"], d["box_half"], self.order, self.alpha, wp.empty((K, self.order * self.order), dtype=wp.float32, device=dev),
-            ], outputs=outs)
+            ], outs)
         culled, err, geo, lumi = (o.numpy() for o in outs)
         return culled.astype(bool), err.astype(np.float64), geo.astype(np.float64), lumi.astype(np.float64)
 
@@ -539,10 +557,10 @@ class Runtime:
         rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
         if A:
             used, weights = self._frame_inputs()
-            wp.launch(kr.relight, dim=A, device=dev, inputs=[
+            self._launch(kr.relight, A, [
                 wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), d["positions"], d["normals"],
                 wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"], self.order,
-                wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)], outputs=[coef, rad])
+                wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)], [coef, rad])
         return coef.numpy(), rad.numpy()
 
     def _triangles(self) -> np.ndarray:

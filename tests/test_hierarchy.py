@@ -274,3 +274,31 @@ def test_bad_input_is_refused():
         build_hierarchy(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((3, 3)))
     with pytest.raises(LodprtError, match="non-finite"):
         build_hierarchy(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), np.zeros((3, 3)))
+
+
+def test_batched_steps_stay_legal(scene, hier):
+    """refine_many / force_refine_many / coarsen_many from the base cut: the asked-for nodes get split, every
+    batch leaves a legal cut (dependency invariant, a valid front), and coarsening everything returns to the base."""
+    from lodprt.hierarchy import dependency_violations
+
+    h = hier
+    cut = Cut.base(h, scene.faces)
+    rng = np.random.default_rng(11)
+    n = cut.force_refine_many(h.roots[h.children[h.roots, 0] >= 0])
+    assert n > 0
+    assert len(dependency_violations(h, scene.faces, cut.anc)) == 0
+    for _ in range(6):
+        act = np.flatnonzero(cut.active)
+        cut.force_refine_many(act[act >= h.num_vertices][rng.random((act >= h.num_vertices).sum()) < 0.5])
+        np.testing.assert_array_equal(cut.anc, active_ancestors(h, cut.active))
+        assert len(dependency_violations(h, scene.faces, cut.anc)) == 0
+    done = cut.refine_many(np.flatnonzero(cut.active))
+    assert len(dependency_violations(h, scene.faces, cut.anc)) == 0 and done.any()
+    for _ in range(200):  # coarsen everything, in batches, back to the base mesh
+        act = np.flatnonzero(cut.active)
+        par = np.unique(h.parent[act][h.parent[act] >= 0])
+        ok, _ = cut.coarsen_many(par)
+        assert len(dependency_violations(h, scene.faces, cut.anc)) == 0
+        if not ok.any():
+            break
+    np.testing.assert_array_equal(np.flatnonzero(cut.active), np.sort(h.roots))
