@@ -377,12 +377,23 @@ def _cmd_radiance(args) -> int:
     else:
         if args.color is not None and len(args.color) != len(args.light):
             raise LodprtError(f"--color: {len(args.color)} given for {len(args.light)} --light; give one per light or none")
-        rt = store.runtime(outside=args.outside, lod=False)
+        rt = _runtime(store, outside=args.outside, lod=False)
         rt.set_lights(args.light, colors=args.color)
         rad = rt.radiance(args.eye)
     np.save(out, rad)
     print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
     return 0
+
+
+def _runtime(store, **options):
+    """``store.runtime(**options)`` with a progress bar on stderr while the light samples are completed."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=store.num_samples, unit="sample", desc="completing light samples", file=sys.stderr, leave=False)
+    try:
+        return store.runtime(progress=lambda done, total: bar.update(done - bar.n), **options)
+    finally:
+        bar.close()
 
 
 def _cmd_frames(args) -> int:
@@ -392,8 +403,8 @@ def _cmd_frames(args) -> int:
     if args.frames < 1:
         raise LodprtError(f"--frames {args.frames}: must be >= 1")
     store = open_store(args.store)
-    rt = store.runtime(error_bound=args.error_bound, alpha=args.alpha, triangle_budget=args.triangle_budget,
-                       device=args.device)
+    rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, triangle_budget=args.triangle_budget,
+                  device=args.device)
     rows = []
     for k, (camera, lights) in enumerate(camera_path(rt, args.path, args.frames, size=tuple(args.size), fov=args.fov)):
         rt.set_camera(camera)

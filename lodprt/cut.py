@@ -14,16 +14,7 @@ import math
 import numpy as np
 
 from lodprt.devices import warp
-from lodprt.hierarchy import Hierarchy
-
-
-def heights(h: Hierarchy) -> np.ndarray:
-    """(N,) int32 height of every node: 0 for leaves, 1 + the higher child's height above."""
-    out = np.zeros(h.num_nodes, np.int32)
-    ch = h.children
-    for k in range(h.num_vertices, h.num_nodes):  # creation order: children first
-        out[k] = 1 + max(out[ch[k, 0]], out[ch[k, 1]])
-    return out
+from lodprt.hierarchy import Hierarchy, node_heights
 
 
 class LightCut:
@@ -35,7 +26,7 @@ class LightCut:
         self.h = h
         self.wp = wp
         self.device = device
-        hk = heights(h)
+        hk = node_heights(h)
         order = np.argsort(hk, kind="stable")
         counts = np.bincount(hk)
         self.levels = []  # device arrays of the internal nodes of each height >= 1

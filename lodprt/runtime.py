@@ -165,7 +165,8 @@ class Runtime:
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
     (``lodprt.lights``); max_passes: refinement passes per frame after the first; lod=False: the full mesh;
-    device: the Warp device of the per-frame kernels (default: CUDA when present, else the CPU).
+    device: the Warp device of the per-frame kernels (default: CUDA when present, else the CPU);
+    progress(done, total): called as the light samples are completed.
     """
 
     def __init__(self, store, *, error_bound: float = 0.25, alpha: float = 0.6, triangle_budget: int | None = None,
@@ -198,8 +199,9 @@ class Runtime:
         first = store._complete(0).astype(np.float32)
         self.coeffs = np.empty((first.shape[0], S) + first.shape[1:], np.float32)
         self.coeffs[:, 0] = first
-        for k in range(1, S):
-            self.coeffs[:, k] = store._complete(k)
+        for k in range(S):
+            if k:
+                self.coeffs[:, k] = store._complete(k)
             if progress:
                 progress(k + 1, S)
         self.channels = self.coeffs.shape[2]
@@ -207,7 +209,7 @@ class Runtime:
         self.white = float(white) if white is not None else self._default_white()
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
-        self.box_centre, self.box_half = self._coefficient_boxes()
+        self._boxes = None  # per-node coefficient boxes for e_lumi, made when the view cut first needs them
         # per-node geometry for the error terms
         self.node_pos = self.positions[h.vertex]
         internal = h.children[:, 1] >= 0
@@ -236,6 +238,23 @@ class Runtime:
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
     # -- set-up ------------------------------------------------------------------------------------------------
+    @property
+    def box_centre(self) -> np.ndarray:
+        return self._ensure_boxes()[0]
+
+    @property
+    def box_half(self) -> np.ndarray:
+        return self._ensure_boxes()[1]
+
+    def _ensure_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._boxes is None:
+            centre, half = self._coefficient_boxes()
+            wp = self._wp
+            self._d["box_centre"] = wp.array(centre, dtype=wp.float16, device=self.device)
+            self._d["box_half"] = wp.array(half, dtype=wp.float16, device=self.device)
+            self._boxes = centre, half
+        return self._boxes
+
     def _coefficient_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """Per light sample, the box of every completed coefficient over each internal node's leaves, in units of
         ``white``: centre and half-width, each (N - V, S, C, ncoef) float16 (clipped to float16's range), made
@@ -281,8 +300,6 @@ class Runtime:
             "node_pos": v3(self.node_pos), "node_collapsed": v3(self.node_collapsed),
             "error_vector": v3(self.error_vector), "axis": v3(self.axis), "half": f1(self.half),
             "radius": f1(self.radius), "positions": v3(self.positions), "normals": v3(self.normals),
-            "box_centre": wp.array(self.box_centre, dtype=wp.float16, device=dev),
-            "box_half": wp.array(self.box_half, dtype=wp.float16, device=dev),
             "coeffs": wp.array(self.coeffs, dtype=wp.float32, device=dev),
         }
 
@@ -388,6 +405,7 @@ class Runtime:
         if K:
             cam = self.camera
             used, weights = self._frame_inputs()
+            self._ensure_boxes()
             self._launch(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
                 d["error_vector"], d["axis"], d["half"], d["radius"],
