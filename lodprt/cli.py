@@ -98,7 +98,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     b.add_argument("scene", metavar="SCENE", help="'demo', a .toml scene file, or a mesh (obj, ply, stl, off, glb)")
     b.add_argument("-o", "--out", required=True, metavar="OUT.zarr", help="store to write (never replaced without --overwrite)")
-    b.add_argument("--sh-order", type=int, default=4, metavar="N", help="SH bands (N*N coefficients), default 4")
+    b.add_argument("--sh-order", type=int, default=None, metavar="N",
+                   help="SH bands (N*N coefficients), default 4 (3 with --environment)")
+    b.add_argument("--environment", default=None, metavar="ENV",
+                   help="bake distant-light transfer instead (as bake-environment with its defaults, which lists the "
+                   "transfer options): ENV is stored as the default lighting; 'none' stores none")
     b.add_argument("--device", default=None, metavar="DEV", help="Warp device: cpu, cuda, cuda:N (default: cuda if present, else cpu)")
     b.add_argument("--threshold-deg", type=float, default=5.0, metavar="E",
                    help="light cut: collapse lit siblings whose incident angles differ by less than E degrees (default 5)")
@@ -171,7 +175,11 @@ def _parser() -> argparse.ArgumentParser:
         "it offscreen (EGL). A .png is tone-mapped sRGB; a .npy is the linear radiance image (H, W, 3) float32, "
         "background 0, no overlays. Camera: perspective, vertical field of view, right-handed, y up (docs/DISPLAY.md).",
     )
-    _view_args(rn, "frame.png|frame.npy")
+    _view_args(rn, "frame.png|frame.npy", required=False)
+    rn.add_argument("--environment", default=None, metavar="ENV",
+                    help="OUT is a transfer store (bake --environment): relight it by this environment instead of point "
+                    "lights (as render-environment; 'stored' uses the bake's own)")
+    rn.add_argument("--rotate", type=float, default=0.0, metavar="DEG", help="with --environment: turn it about +y by DEG degrees")
     cp = sub.add_parser(
         "compare",
         help="figure: LOD frame, full-resolution frame and their difference side by side (figures 14-17)",
@@ -205,10 +213,29 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _delegate(command: str, argv: list[str]) -> int:
+    """Run another subcommand with these arguments (the short forms bake/render --environment)."""
+    args = _parser().parse_args([command, *argv])
+    return {**environment_cli.COMMANDS}[command](args)
+
+
 def _cmd_render(args) -> int:
     from lodprt.render import render_to_file
     from lodprt.store import open_store
 
+    if args.environment is not None:  # a transfer store relit by an environment: render-environment
+        if args.light:
+            raise LodprtError("--light and --environment exclude each other (point lights or an environment)")
+        argv = [args.store, "--rotate", str(args.rotate), "--fov", str(args.fov), "--size", *map(str, args.size),
+                "-o", str(args.out)]
+        argv += [] if args.environment == "stored" else ["--environment", args.environment]
+        if args.eye is None:
+            raise LodprtError("--environment needs --eye X Y Z")
+        argv += ["--eye", *map(str, args.eye)]
+        argv += ["--target", *map(str, args.target)] if args.target is not None else []
+        argv += ["--white", str(args.white)] if args.white is not None else []
+        argv += ["--overwrite"] if args.overwrite else []
+        return _delegate("render-environment", argv)
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     stats = render_to_file(store, args.out, lights=lights, colors=colors, camera=camera, error_bound=args.error_bound,
@@ -282,6 +309,17 @@ def _cmd_diff(args) -> int:
 
 
 def _cmd_bake(args) -> int:
+    if args.environment is not None:  # distant-light transfer: bake-environment with its defaults
+        if args.full or args.no_hierarchy:
+            raise LodprtError("--full and --no-hierarchy are point-light options; an environment bake has no light "
+                              "cut (see bake-environment --lod-threshold)")
+        argv = [args.scene, "-o", str(args.out)]
+        argv += ["--jobs", str(args.jobs)] if args.jobs is not None else []
+        argv += [] if args.environment == "none" else ["--environment", args.environment]
+        argv += ["--sh-order", str(args.sh_order)] if args.sh_order is not None else []
+        argv += ["--device", args.device] if args.device else []
+        argv += ["--overwrite"] if args.overwrite else []
+        return _delegate("bake-environment", argv)
     from tqdm import tqdm
 
     from lodprt.bake import bake
@@ -313,7 +351,7 @@ def _cmd_bake(args) -> int:
         res = bake(
             scene,
             args.out,
-            sh_order=args.sh_order,
+            sh_order=4 if args.sh_order is None else args.sh_order,
             device=device,
             overwrite=args.overwrite,
             jobs=args.jobs,

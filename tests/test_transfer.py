@@ -332,6 +332,32 @@ def test_cli_bake_and_render_environment(tmp_path, capsys):
     assert main(["render-environment", str(tmp_path / "nope.zarr"), "--eye", "0", "1", "4", "-o", str(png)]) == 2
 
 
+def test_cli_short_forms_bake_and_render_with_environment(tmp_path, capsys):
+    """`lodprt bake SCENE --environment ENV` and `lodprt render OUT --environment ENV --rotate DEG` do what
+    bake-environment / render-environment do (the same store, a PNG); point-light options are refused clearly."""
+    import trimesh
+
+    from lodprt.cli import main
+    from lodprt.relight import open_transfer
+
+    mesh = tmp_path / "ball.obj"
+    trimesh.creation.icosphere(subdivisions=1).export(mesh)
+    out = tmp_path / "ball.zarr"
+    assert main(["bake", str(mesh), "--environment", "sky:16", "--sh-order", "2", "-o", str(out)]) == 0
+    store = open_transfer(out)
+    assert store.order == 2
+    png = tmp_path / "relit.png"
+    code = main(["render", str(out), "--environment", "stored", "--rotate", "30", "--eye", "0", "1", "4",
+                 "--size", "48", "32", "-o", str(png)])
+    if code == 2 and "EGL" in capsys.readouterr().err:  # pragma: no cover - machines without EGL
+        pytest.skip("no EGL")
+    assert code == 0 and png.is_file()
+    assert main(["bake", str(mesh), "--environment", "sky:16", "--full", "-o", str(tmp_path / "x.zarr")]) == 2
+    assert "point-light options" in capsys.readouterr().err
+    assert main(["render", str(out), "--environment", "sky:16", "-o", str(tmp_path / "y.png")]) == 2
+    assert "--eye" in capsys.readouterr().err
+
+
 @pytest.fixture(scope="module")
 def ball_lod():
     """The ball on a 40 x 40 floor (1,762 vertices), its shadowed transfer (cpu) and its vertex hierarchy."""
