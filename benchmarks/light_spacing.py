@@ -117,11 +117,14 @@ def main():
         for r in rows:
             ax.annotate(r["grid"], (r[key], r["rmse_between"]), fontsize=8, xytext=(3, 3), textcoords="offset points")
         ax.set_xlabel(label)
-        ax.set_ylabel("relative RMSE vs exact Phong (facing eye, no shadow edges)")
+        ax.set_ylabel("rRMSE vs exact Phong")
         ax.grid(alpha=0.3)
     axes[1].set_xscale("log")
+    axes[1].xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    axes[1].xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     axes[0].legend(fontsize=8)
-    fig.suptitle("Light-sample spacing (thesis 4.3): interpolation error against spacing and bytes")
+    fig.suptitle("Light-sample spacing (thesis 4.3): error of lights between samples against exact Phong\n"
+                 "(vertices facing the eye, shadow-boundary vertices excluded)", fontsize=10)
     fig.tight_layout()
     fig.savefig(plot_path(name), dpi=120)
     print("wrote", plot_path(name))
