@@ -8,11 +8,13 @@ Controls (also printed by H):
     shift + left drag  move the selected light in the screen plane; shift + wheel moves it toward/away from you
     Tab                select the next light                    A / Delete            add / remove a light
     [ / ]              error bound / 1.25, x 1.25               , / .                 alpha - / + 0.05
+    left press / drag on a slider (bottom left): set the error bound or alpha (0 to 1) from the x position
     W wireframe        L LOD on/off                             V per-vertex / per-fragment radiance
     M light markers    - / =  exposure - / + 1/2 stop            H help     Q / Escape quit
 
 The overlay (top left) shows triangles, vertices, error bound, alpha, lights and the frame time (run-time update
-and draw). Without a display it raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
+and draw); the sliders (bottom left) show the error bound and alpha and follow the keys. Without a display it
+raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
 """
 
 from __future__ import annotations
@@ -48,6 +50,69 @@ void main() { f_col = texture(text, v_uv); }
 """
 
 
+@dataclasses.dataclass(frozen=True)
+class Slider:
+    """A horizontal slider in framebuffer pixels (origin top left, y down): ``rect`` = (x, y, width, height) of its
+    track, the part a press must start in; ``value_at`` maps an x position linearly onto [lo, hi], clamped at the
+    ends."""
+
+    name: str  # the ViewerState field it sets
+    label: str
+    rect: tuple[float, float, float, float]
+    lo: float = 0.0
+    hi: float = 1.0
+
+    def contains(self, x: float, y: float) -> bool:
+        x0, y0, w, h = self.rect
+        return x0 <= x <= x0 + w and y0 <= y <= y0 + h
+
+    def value_at(self, x: float) -> float:
+        x0, _, w, _ = self.rect
+        t = min(max((x - x0) / w, 0.0), 1.0)
+        return self.lo + t * (self.hi - self.lo)
+
+    def fraction(self, value: float) -> float:
+        """How much of the track is filled for ``value`` (0 to 1; values outside the range fill none or all)."""
+        return min(max((value - self.lo) / (self.hi - self.lo), 0.0), 1.0)
+
+
+SLIDER_MARGIN, SLIDER_ROW, SLIDER_LABEL, SLIDER_VALUE = 6, 16, 72, 44  # pixels: edge gap, row height, text widths
+
+
+def slider_layout(width: int, height: int) -> tuple[Slider, ...]:
+    """The error-bound and alpha sliders in the bottom-left corner of a ``width`` x ``height`` pixel window: a label
+    column, the track, then the value; the track is 160 pixels wide, less in a narrow window (at least 40)."""
+    track = max(40, min(160, width - 2 * SLIDER_MARGIN - SLIDER_LABEL - SLIDER_VALUE - 8))
+    x0 = SLIDER_MARGIN + 4 + SLIDER_LABEL
+    rows = (("error_bound", "error bound"), ("alpha", "alpha"))
+    top = height - SLIDER_MARGIN - 4 - SLIDER_ROW * len(rows)
+    return tuple(Slider(name, label, (x0, top + i * SLIDER_ROW + 2, track, SLIDER_ROW - 4))
+                 for i, (name, label) in enumerate(rows))
+
+
+def _slider_panel(sliders, values) -> tuple[object, tuple[int, int]]:
+    """The sliders drawn with Pillow: an RGBA image of the panel behind them and its top-left corner (pixels)."""
+    from PIL import Image, ImageDraw
+
+    x_end = max(s.rect[0] + s.rect[2] for s in sliders) + 4 + SLIDER_VALUE
+    y0 = min(s.rect[1] for s in sliders) - 4
+    y_end = max(s.rect[1] + s.rect[3] for s in sliders) + 4
+    left, top = SLIDER_MARGIN, int(y0)
+    img = Image.new("RGBA", (int(x_end) - left, int(y_end) - top), (0, 0, 0, 150))
+    draw = ImageDraw.Draw(img)
+    for s in sliders:
+        x, y, w, h = (int(round(v)) for v in s.rect)
+        x, y = x - left, y - top
+        value = values[s.name]
+        draw.text((4, y + h / 2 - 6), s.label, fill=(255, 255, 255, 255))
+        draw.rectangle((x, y + 2, x + w - 1, y + h - 3), fill=(70, 70, 70, 255), outline=(150, 150, 150, 255))
+        fill = int(round(s.fraction(value) * (w - 2)))
+        if fill > 0:
+            draw.rectangle((x + 1, y + 3, x + fill, y + h - 4), fill=(255, 200, 60, 255))
+        draw.text((x + w + 4, y + h / 2 - 6), f"{value:.3g}", fill=(255, 255, 255, 255))
+    return img, (left, top)
+
+
 def _check_display() -> None:
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise LodprtError("no display: DISPLAY is not set (run it on a desktop, over ssh -X, or under a virtual "
@@ -58,37 +123,52 @@ def _check_display() -> None:
 
 
 class _Overlay:
-    """Text in the top-left corner: drawn with Pillow into a texture, blended over the frame."""
+    """Text in the top-left corner and the sliders in the bottom-left one: drawn with Pillow into textures (redrawn
+    only when they change), blended over the frame."""
 
     def __init__(self, ctx):
         self.ctx = ctx
         self.prog = ctx.program(vertex_shader=_OVERLAY_VERTEX, fragment_shader=_OVERLAY_FRAGMENT)
-        self.tex = None
         self.vbo = ctx.buffer(reserve=4 * 4 * 4)
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f 2f", "in_pos", "in_uv")])
-        self.text = None
+        self.tex = {}  # what -> (key it was drawn from, top-left pixel, texture)
 
-    def draw(self, text: str, size: tuple[int, int]) -> None:
-        import moderngl
+    def draw(self, text: str, size: tuple[int, int], sliders=(), values=None) -> None:
         from PIL import Image, ImageDraw
 
-        if text != self.text or self.tex is None:
+        def text_image():
             lines = text.split("\n")
-            w, h = 8 + 7 * max(len(s) for s in lines), 6 + 13 * len(lines)
-            img = Image.new("RGBA", (w, h), (0, 0, 0, 150))
+            img = Image.new("RGBA", (8 + 7 * max(len(s) for s in lines), 6 + 13 * len(lines)), (0, 0, 0, 150))
             ImageDraw.Draw(img).multiline_text((4, 3), text, fill=(255, 255, 255, 255), spacing=2)
-            if self.tex is not None:
-                self.tex.release()
-            self.tex = self.ctx.texture((w, h), 4, img.transpose(Image.FLIP_TOP_BOTTOM).tobytes())
-            self.tex.filter = (moderngl.NEAREST, moderngl.NEAREST)  # one texel per pixel: crisp text
-            self.text = text
-        w, h = self.tex.size
-        x1, y0 = -1 + 2 * w / size[0], 1 - 2 * h / size[1]
-        self.vbo.write(np.array([-1, y0, 0, 0, x1, y0, 1, 0, -1, 1, 0, 1, x1, 1, 1, 1], np.float32).tobytes())
+            return img, (0, 0)
+
+        self._blit("text", text, text_image, size)
+        if sliders:
+            key = (tuple(sliders), tuple(values[s.name] for s in sliders))
+            self._blit("sliders", key, lambda: _slider_panel(sliders, values), size)
+
+    def _blit(self, what, key, make, size) -> None:
+        """Draw the image ``make()`` returns at its top-left pixel position; made again only when ``key`` changed."""
+        import moderngl
+        from PIL import Image
+
+        old = self.tex.get(what)
+        if old is None or old[0] != key:
+            img, pos = make()
+            if old is not None:
+                old[2].release()
+            tex = self.ctx.texture(img.size, 4, img.transpose(Image.FLIP_TOP_BOTTOM).tobytes())
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)  # one texel per pixel: crisp text
+            self.tex[what] = old = (key, pos, tex)
+        _, (px, py), tex = old
+        w, h = tex.size
+        x0, x1 = -1 + 2 * px / size[0], -1 + 2 * (px + w) / size[0]
+        y1, y0 = 1 - 2 * py / size[1], 1 - 2 * (py + h) / size[1]
+        self.vbo.write(np.array([x0, y0, 0, 0, x1, y0, 1, 0, x0, y1, 0, 1, x1, y1, 1, 1], np.float32).tobytes())
         self.ctx.disable(moderngl.DEPTH_TEST)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        self.tex.use(0)
+        tex.use(0)
         self.prog["text"].value = 0
         self.vao.render(moderngl.TRIANGLE_STRIP)
         self.ctx.disable(moderngl.BLEND)
@@ -111,6 +191,58 @@ class ViewerState:
     exposure: float = 0.0
     selected: int = 0
     dirty: bool = True  # the run time must make a new frame
+    grabbed: Slider | None = None  # the slider a left press started on, until the button is released
+
+    # -- sliders and the keys that change the same values -------------------------------------------------------
+    def sliders(self) -> tuple[Slider, ...]:
+        """The sliders laid out for the current window (camera) size, in its pixels."""
+        return slider_layout(self.camera.width, self.camera.height)
+
+    def set_value(self, name: str, value: float) -> None:
+        """Error bound (>= 0) or alpha (clamped to [0, 1]); what the sliders and the keys both go through."""
+        value = max(float(value), 0.0) if name == "error_bound" else min(max(float(value), 0.0), 1.0)
+        if value != getattr(self, name):
+            setattr(self, name, value)
+            self.dirty = True
+
+    def step_error_bound(self, up: bool) -> None:
+        """``]`` / ``[``: error bound x 1.25 or / 1.25 (up from 0, where scaling is stuck, goes to 0.01)."""
+        e = self.error_bound
+        self.set_value("error_bound", (e * 1.25 if e > 0 else 0.01) if up else e / 1.25)
+
+    def step_alpha(self, up: bool) -> None:
+        """``.`` / ``,``: alpha + or - 0.05 within [0, 1]."""
+        self.set_value("alpha", round(self.alpha + (0.05 if up else -0.05), 10))
+
+    # -- the mouse (pixels of the window's framebuffer, origin top left) -------------------------------------------
+    def press(self, x: float, y: float, left: bool = True) -> bool:
+        """A button went down at (x, y): a left press on a slider grabs it and sets its value from x (True);
+        anything else leaves the drag to the camera and lights (False)."""
+        self.grabbed = None
+        if left:
+            for slider in self.sliders():
+                if slider.contains(x, y):
+                    self.grabbed = slider
+                    self.set_value(slider.name, slider.value_at(x))
+                    return True
+        return False
+
+    def release(self) -> None:
+        self.grabbed = None
+
+    def drag(self, x: float, y: float, dx: float, dy: float, *, left: bool = True, shift: bool = False) -> None:
+        """The mouse moved by (dx, dy) to (x, y) with a button down: the grabbed slider follows x; otherwise shift
+        moves the selected light, left orbits, right / middle pans (as fractions of the window height)."""
+        if self.grabbed is not None:
+            self.set_value(self.grabbed.name, self.grabbed.value_at(x))
+            return
+        scale = 1.0 / max(self.camera.height, 1)
+        if shift:
+            self.move_light(dx * scale, -dy * scale)
+        elif left:
+            self.orbit(dx * 3 * scale, dy * 3 * scale)
+        else:
+            self.pan(dx * scale, dy * scale)
 
     def orbit(self, dx: float, dy: float) -> None:
         """Turn the eye about the target: dx radians about up, dy radians about the camera's right axis."""
@@ -206,21 +338,26 @@ class Viewer:
         self.frame = None
         self.ms_update = self.ms_draw = 0.0
         w.mouse_drag_event_func = self._drag
+        w.mouse_press_event_func = self._press
+        w.mouse_release_event_func = lambda x, y, button: self.state.release()
         w.mouse_scroll_event_func = self._scroll
         w.key_event_func = self._key
         w.resize_func = lambda width, height: self.state.resize(*self.window.buffer_size)
         self.state.resize(*w.buffer_size)
 
     # -- events ----------------------------------------------------------------------------------------------
+    def _pixels(self, x, y, dx=0.0, dy=0.0):
+        """Window coordinates (what pyglet reports) to framebuffer pixels (what the state and overlay use)."""
+        w = self.window
+        rx, ry = w.buffer_size[0] / max(w.size[0], 1), w.buffer_size[1] / max(w.size[1], 1)
+        return x * rx, y * ry, dx * rx, dy * ry
+
+    def _press(self, x, y, button):
+        self.state.press(*self._pixels(x, y)[:2], left=button == self.window.mouse.left)
+
     def _drag(self, x, y, dx, dy):
-        s, w = self.state, self.window
-        scale = 1.0 / max(w.size[1], 1)
-        if w.modifiers.shift:
-            s.move_light(dx * scale, -dy * scale)
-        elif w.mouse_states.left:
-            s.orbit(dx * 3 * scale, dy * 3 * scale)
-        else:
-            s.pan(dx * scale, dy * scale)
+        w = self.window
+        self.state.drag(*self._pixels(x, y, dx, dy), left=w.mouse_states.left, shift=w.modifiers.shift)
 
     def _scroll(self, x_offset, y_offset):
         if self.window.modifiers.shift:
@@ -241,11 +378,9 @@ class Viewer:
         elif key in (keys.DELETE, keys.BACKSPACE):
             s.remove_light()
         elif key in (keys.LEFT_BRACKET, keys.RIGHT_BRACKET):
-            s.error_bound = s.error_bound / 1.25 if key == keys.LEFT_BRACKET else s.error_bound * 1.25
-            s.dirty = True
+            s.step_error_bound(key == keys.RIGHT_BRACKET)
         elif key in (keys.COMMA, keys.PERIOD):
-            s.alpha = float(np.clip(s.alpha + (0.05 if key == keys.PERIOD else -0.05), 0.0, 1.0))
-            s.dirty = True
+            s.step_alpha(key == keys.PERIOD)
         elif key == keys.W:
             s.wireframe = not s.wireframe
         elif key == keys.L:
@@ -288,7 +423,7 @@ class Viewer:
                 f"error bound {s.error_bound:.4g}  alpha {s.alpha:.2f}  exposure {s.exposure:+.1f}\n"
                 f"light {s.selected + 1} of {len(s.lights)} at ({', '.join(f'{x:.3f}' for x in s.lights[s.selected])})\n"
                 f"update {self.ms_update:.0f} ms (cut {st.get('ms_cut', 0.0):.0f}), draw {self.ms_draw:.0f} ms  [H help]")
-        self.overlay.draw(text, w.buffer_size)
+        self.overlay.draw(text, w.buffer_size, s.sliders(), {"error_bound": s.error_bound, "alpha": s.alpha})
         self.ms_draw = 1e3 * (time.perf_counter() - t0)
         if info["gl_error"] != "GL_NO_ERROR":
             log.warning("OpenGL error: %s", info["gl_error"])

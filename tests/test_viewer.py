@@ -5,12 +5,13 @@ import os
 import shutil
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from lodprt.runtime import Camera
-from lodprt.viewer import ViewerState
+from lodprt.viewer import Slider, Viewer, ViewerState, slider_layout
 
 
 def state():
@@ -47,6 +48,146 @@ def test_lights_are_added_moved_and_removed():
     s.remove_light()
     s.remove_light()
     assert len(s.lights) == 1 and s.selected == 0
+
+
+def slider(s, name):
+    return next(sl for sl in s.sliders() if sl.name == name)
+
+
+def at(sl, t):
+    """The point a fraction t along the slider's track, halfway down it."""
+    x, y, w, h = sl.rect
+    return x + t * w, y + h / 2
+
+
+def test_slider_maps_x_to_its_range_and_clamps_outside_the_track():
+    """value_at gives lo and hi at the track's ends, is linear between, and clamps beyond them; contains is the rect."""
+    sl = Slider("alpha", "alpha", (10.0, 20.0, 100.0, 12.0))
+    assert sl.value_at(10.0) == 0.0 and sl.value_at(110.0) == 1.0 and sl.value_at(35.0) == 0.25
+    assert sl.value_at(-50.0) == 0.0 and sl.value_at(500.0) == 1.0
+    assert Slider("e", "e", (0.0, 0.0, 10.0, 1.0), lo=2.0, hi=4.0).value_at(5.0) == 3.0
+    assert sl.contains(10.0, 20.0) and sl.contains(110.0, 32.0) and sl.contains(60.0, 26.0)
+    assert not sl.contains(9.0, 26.0) and not sl.contains(111.0, 26.0) and not sl.contains(60.0, 33.0)
+    assert sl.fraction(-1.0) == 0.0 and sl.fraction(0.4) == 0.4 and sl.fraction(1.25) == 1.0
+
+
+def test_sliders_sit_in_the_bottom_left_corner_inside_the_window():
+    """Both sliders (error bound above alpha) lie inside the window's lower-left part and do not overlap."""
+    for width, height in [(200, 100), (240, 180), (1280, 720)]:
+        eb, al = slider_layout(width, height)
+        assert (eb.name, al.name) == ("error_bound", "alpha") and (eb.lo, eb.hi, al.lo, al.hi) == (0, 1, 0, 1)
+        for sl in (eb, al):
+            x, y, w, h = sl.rect
+            assert x >= 0 and x + w <= width / 2 + 100 and y >= height / 2 and y + h <= height and w >= 40
+        assert eb.rect[1] + eb.rect[3] <= al.rect[1]
+
+
+def test_press_on_a_slider_sets_its_value_and_drags_it_without_orbiting():
+    """A left press on the error-bound / alpha track sets that value from x, drags follow x (clamped); no orbit."""
+    s = state()
+    cam = s.camera
+    s.dirty = False
+    assert s.press(*at(slider(s, "error_bound"), 0.75)) is True
+    assert np.isclose(s.error_bound, 0.75) and s.alpha == 0.6 and s.dirty
+    x, y = at(slider(s, "error_bound"), 0.5)
+    s.drag(x, y - 40, 5.0, -40.0)  # the drag may leave the track vertically: the grabbed slider keeps following x
+    assert np.isclose(s.error_bound, 0.5)
+    s.drag(*at(slider(s, "error_bound"), 3.0), 200.0, 0.0)
+    assert s.error_bound == 1.0 and s.camera == cam
+    s.release()
+    assert s.press(*at(slider(s, "alpha"), 0.2)) is True
+    assert np.isclose(s.alpha, 0.2) and s.error_bound == 1.0
+    s.drag(*at(slider(s, "alpha"), -1.0), -100.0, 0.0)
+    assert s.alpha == 0.0 and s.camera == cam
+    s.release()
+    s.drag(50.0, 50.0, 10.0, 0.0)  # after the release a drag orbits again
+    assert s.camera.eye != cam.eye and s.alpha == 0.0
+
+
+def test_press_outside_the_sliders_orbits_as_before():
+    """A left press off the sliders (or a right press on one) leaves the values alone: the drag orbits (pans)."""
+    s = state()
+    assert s.press(100.0, 30.0) is False
+    s.drag(110.0, 30.0, 10.0, 0.0)
+    ref = state()
+    ref.orbit(10.0 * 3 / 100, 0.0)  # the old rule: 3 radians per window height
+    np.testing.assert_allclose(s.camera.eye, ref.camera.eye)
+    assert (s.error_bound, s.alpha) == (0.25, 0.6)
+    s = state()
+    assert s.press(*at(slider(s, "alpha"), 0.9), left=False) is False
+    s.drag(*at(slider(s, "alpha"), 0.95), 5.0, 0.0, left=False)
+    assert s.alpha == 0.6 and s.camera.target != state().camera.target
+
+
+class _Names:
+    """Stands in for moderngl-window's keys / buttons: every attribute is its own name."""
+
+    def __getattr__(self, name):
+        return name
+
+
+def fake_viewer(s):
+    """A Viewer's event handlers on a window stand-in (framebuffer twice the window size, as on a HiDPI screen)."""
+    window = SimpleNamespace(keys=_Names(), mouse=_Names(), size=(s.camera.width // 2, s.camera.height // 2),
+                             buffer_size=(s.camera.width, s.camera.height), modifiers=SimpleNamespace(shift=False),
+                             mouse_states=SimpleNamespace(left=True))
+    v = SimpleNamespace(state=s, window=window, source=None)
+    for name in ("_key", "_press", "_drag", "_pixels"):
+        setattr(v, name, getattr(Viewer, name).__get__(v))
+    return v
+
+
+def test_keys_and_sliders_change_the_same_values():
+    """The window's [ ] , . keys and its mouse presses on the sliders change one error bound and alpha, each from where
+    the other left it; the sliders' fill follows the keys (full past 1), and ] gets the error bound off 0."""
+    s = state()
+    v = fake_viewer(s)
+    x, y = at(slider(s, "error_bound"), 0.5)
+    v._press(x / 2, y / 2, "left")  # window coordinates: half the framebuffer's
+    assert np.isclose(s.error_bound, 0.5)
+    v._key("RIGHT_BRACKET", "ACTION_PRESS", None)
+    assert np.isclose(s.error_bound, 0.625) and np.isclose(slider(s, "error_bound").fraction(s.error_bound), 0.625)
+    x, y = at(slider(s, "alpha"), 0.3)
+    v._press(x / 2, y / 2, "left")
+    v._key("PERIOD", "ACTION_PRESS", None)
+    assert np.isclose(s.alpha, 0.35) and np.isclose(s.error_bound, 0.625)
+    v._key("COMMA", "ACTION_PRESS", None)
+    v._key("COMMA", "ACTION_PRESS", None)
+    assert np.isclose(s.alpha, 0.25)
+    v._drag(*(c / 2 for c in at(slider(s, "alpha"), 1.0)), 10.0, 0.0)
+    assert s.alpha == 1.0
+    v._key("PERIOD", "ACTION_PRESS", None)
+    assert s.alpha == 1.0
+    for _ in range(3):
+        v._key("RIGHT_BRACKET", "ACTION_PRESS", None)
+    assert np.isclose(s.error_bound, 0.625 * 1.25 ** 3) and slider(s, "error_bound").fraction(s.error_bound) == 1.0
+    x, y = at(slider(s, "error_bound"), 0.0)
+    v._press(x / 2, y / 2, "left")
+    assert s.error_bound == 0.0
+    v._key("LEFT_BRACKET", "ACTION_PRESS", None)
+    assert s.error_bound == 0.0
+    v._key("RIGHT_BRACKET", "ACTION_PRESS", None)
+    assert s.error_bound == 0.01
+
+
+def test_window_drags_off_the_sliders_orbit_pan_and_move_lights():
+    """Through the window's handlers a left drag off the sliders orbits, shift + drag moves the light, right pans."""
+    s = state()
+    v = fake_viewer(s)
+    v._press(50.0, 10.0, "left")
+    v._drag(55.0, 10.0, 5.0, 0.0)  # 5 window pixels = 10 framebuffer pixels
+    ref = state()
+    ref.orbit(10.0 * 3 / 100, 0.0)
+    np.testing.assert_allclose(s.camera.eye, ref.camera.eye)
+    light = s.lights[0].copy()
+    v.window.modifiers.shift = True
+    v._drag(60.0, 10.0, 5.0, 0.0)
+    assert not np.allclose(s.lights[0], light)
+    v.window.modifiers.shift, v.window.mouse_states.left = False, False
+    target = s.camera.target
+    v._press(50.0, 10.0, "right")
+    v._drag(55.0, 10.0, 5.0, 0.0)
+    assert s.camera.target != target and (s.error_bound, s.alpha) == (0.25, 0.6)
 
 
 @pytest.fixture(scope="module")
@@ -105,3 +246,8 @@ def test_viewer_starts_draws_and_closes_under_xvfb(cut_store, xvfb, tmp_path):
     assert (img[100:, :].max(2) > 60).mean() > 0.2  # the lit floor and bunny fill the lower part
     corner = img[:30, :120]
     assert (corner > 240).all(2).any() and (corner < 60).all(2).mean() > 0.5  # white text on its dark box
+    eb, al = slider_layout(240, 180)
+    x, y, w, h = (int(c) for c in al.rect)
+    track = img[y + 4:y + h - 4, x + 2:x + w - 2].astype(int)
+    filled = (track[..., 0] > 230) & (track[..., 1] > 180) & (track[..., 2] < 90)  # the slider's amber fill
+    assert 0.5 < filled.mean(0).astype(bool).mean() < 0.7  # alpha 0.6: the fill covers 60% of the track
