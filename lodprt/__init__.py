@@ -9,6 +9,8 @@ Public API (everything else may change)::
     rt = lodprt.open("out.zarr").runtime(error_bound=0.25, alpha=0.6)   # moving lights, view cut
     rt.set_lights([(0.1, 0.3, 0.0)]); rt.set_camera((0, 0.4, 1.2), (0, 0.1, 0), fov=40, width=800, height=600)
     frame = rt.update()                               # positions, triangles, coefficients, radiance, stats
+    with lodprt.Renderer() as r:                      # offscreen EGL (docs/DISPLAY.md)
+        png = r.image(frame)                          # (H, W, 3) uint8 sRGB; linear=True: float32 radiance
 
     env = lodprt.load_environment("sky")              # or a lat-long .hdr/.exr/.npy, a cube map (docs/ENVIRONMENT.md)
     lodprt.bake_transfer(scene, "env.zarr", order=3, mode="interreflected", environment=env)
@@ -33,6 +35,7 @@ _LAZY = {
     "Camera": "lodprt.runtime",
     "Frame": "lodprt.runtime",
     "LightInterpolator": "lodprt.lights",
+    "Renderer": "lodprt.render",
     "Environment": "lodprt.environment",
     "load_environment": "lodprt.environment",
     "bake_transfer": "lodprt.transfer",
