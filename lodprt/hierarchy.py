@@ -1114,30 +1114,43 @@ class Cut:
             ok[where[~legal]] = False
         return ok, blocker
 
-    def force_refine_many(self, nodes) -> int:
+    def force_refine_many(self, nodes, *, max_rounds: int | None = None) -> int:
         """Forced refinement of many active nodes at once (seed 003, table 5.1): rounds that split every node of
         the set whose split rule holds (as ``refine_many``) and add to the set the active neighbours that block
-        the others (created later, so coarser); each round splits at least the latest-created node of its set,
-        whose neighbours are all older. Returns the number of splits."""
+        the others (created later, so coarser). A blocked node remembers one blocker and is looked at again only
+        once that blocker has been split, so a large subtree is not rescanned every round. Each round splits at
+        least the latest-created node of the set (its neighbours are all older). ``max_rounds`` stops early (the
+        cut is legal after every round; what is left can be forced later). Returns the number of splits."""
         h = self.h
         want = np.unique(np.asarray(nodes, np.int64))
         want = want[self.active[want] & (h.children[want, 0] >= 0)]
-        splits = 0
-        while len(want):
-            seg, nb = self._edge_segments(want)
-            bad = (nb != want[seg]) & (h.creation[nb] > h.creation[want[seg]])
-            legal = np.bincount(seg[bad], minlength=len(want)) == 0
-            go = want[legal]
+        rep = np.full(len(want), -1, np.int64)  # a blocker seen last time (-1: look now)
+        splits = rounds = 0
+        while len(want) and (max_rounds is None or rounds < max_rounds):
+            rounds += 1
+            look = (rep < 0) | ~self.active[np.maximum(rep, 0)]
+            scan = want[look]
+            seg, nb = self._edge_segments(scan)
+            bad = (nb != scan[seg]) & (h.creation[nb] > h.creation[scan[seg]])
+            legal = np.bincount(seg[bad], minlength=len(scan)) == 0
+            go = scan[legal]
             if len(go):
                 ch = h.children[go]
                 self.active[go] = False
                 self.active[ch.ravel()] = True
                 self._set_leaves(ch.ravel())
                 splits += len(go)
-            want = np.unique(np.concatenate([want[~legal], nb[bad]]))
-            want = want[self.active[want]]  # a blocker this round split is gone; its children show up next round
-            if not len(go) and not bad.any():  # cannot happen for a valid cut: fall back to one at a time
-                for k in want:
+            first = np.full(len(scan), -1, np.int64)
+            first[seg[bad][::-1]] = nb[bad][::-1]
+            rep[look] = first
+            keep = self.active[want]
+            want, rep = want[keep], rep[keep]
+            new = np.setdiff1d(np.unique(nb[bad]), want)
+            new = new[self.active[new]]  # a blocker split this round is gone; its children show up when looked at
+            want = np.concatenate([want, new])
+            rep = np.concatenate([rep, np.full(len(new), -1, np.int64)])
+            if not len(go) and not len(new) and not ((rep < 0) | ~self.active[np.maximum(rep, 0)]).any():
+                for k in want:  # cannot happen for a valid cut: fall back to one at a time
                     splits += self.force_refine(int(k))
                 break
         return splits

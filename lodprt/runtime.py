@@ -52,6 +52,9 @@ from lodprt.lights import LightInterpolator
 
 log = logging.getLogger(__name__)
 
+#: rounds of forced refinement per pass after the first frame (each round splits what its dependencies allow)
+FORCE_ROUNDS = 24
+
 
 @dataclasses.dataclass(frozen=True)
 class Camera:
@@ -503,7 +506,9 @@ class Runtime:
         split = split[cut.active[split]]
         touched += len(split)  # (refine_many skips nodes no longer active)
         if len(split):  # allowed splits at once; blocked ones forced, their blockers split first (all at once)
-            n = cut.force_refine_many(split)
+            # a long chain of forced splits is spread over frames (FORCE_ROUNDS rounds a pass) once the cut has
+            # converged, so that no frame stalls; the first frame converges in full
+            n = cut.force_refine_many(split, max_rounds=FORCE_ROUNDS if self._converged_once else None)
             refined += n
             touched += max(n - len(split), 0)
         return refined, coarsened, touched
