@@ -7,7 +7,7 @@ compute the same quantities and are the tests' reference.
 
 import warp as wp
 
-from lodprt.kernels.sh import sh_basis
+from lodprt.kernels.sh import sh_basis_fast
 
 wp.set_module_options({"enable_backward": False})
 
@@ -68,6 +68,11 @@ def view_errors(
         if ang > 1.5707963267948966 + half_angle[node] + spread:
             out = 1
     culled[k] = wp.uint8(out)
+    if out == 1:  # culled nodes are coarsened whatever their error: none is computed
+        e_geo[k] = 0.0
+        e_lumi[k] = 0.0
+        err[k] = 0.0
+        return
     # e_geo: both ends of the error vector on screen, their distance over the diagonal
     a = node_collapsed[node]
     b = a - error_vector[node]
@@ -79,7 +84,7 @@ def view_errors(
         dy = (ca[1] / ca[3] - cb[1] / cb[3]) * half_h
         g = wp.min(wp.sqrt(dx * dx + dy * dy) / diag, 1.0)
     # e_lumi: the display spread of the interval that holds the leaves' radiance toward the eye
-    sh_basis(vh, order, basis, k)
+    sh_basis_fast(vh, order, basis, k)
     ncoef = order * order
     row = node - first_internal
     channels = box_centre.shape[2]
@@ -134,7 +139,7 @@ def relight(
     dv = eye - positions[v]
     if wp.length(dv) <= 0.0:
         dv = normals[v]
-    sh_basis(dv, order, basis, k)
+    sh_basis_fast(dv, order, basis, k)
     ncoef = order * order
     channels = coeffs.shape[2]
     for c in range(3):

@@ -73,6 +73,57 @@ def sh_basis(
                 out[row, base - m] = s * im
 
 
+@wp.func
+def sh_basis_fast(
+    d: wp.vec3,  # In: direction, any length (normalised here; a zero vector reads as +z)
+    order: int,  # In: bands; order^2 values are written
+    out: wp.array2d(dtype=wp.float32),  # Out: out[row, i] = y_i(d) for i < order^2
+    row: int,  # In: row of out to fill
+):
+    """``sh_basis`` with the bands l <= 3 written as their closed-form polynomials in (x, y, z) (same convention:
+    no Condon-Shortley phase, y_1 = sqrt(3/4pi) (y, z, x)); orders above 4 take the recurrence. About ten times
+    cheaper per direction for the run time's per-frame kernels, which evaluate one basis per node or vertex."""
+    if order > 4:
+        sh_basis(d, order, out, row)
+        return
+    big = wp.max(wp.max(wp.abs(d[0]), wp.abs(d[1])), wp.abs(d[2]))
+    u = wp.vec3(0.0, 0.0, 1.0)
+    if big > 0.0:
+        u = wp.normalize(d / big)
+    x = u[0]
+    y = u[1]
+    z = u[2]
+    out[row, 0] = 0.28209479177387814
+    if order > 1:
+        out[row, 1] = 0.4886025119029199 * y
+        out[row, 2] = 0.4886025119029199 * z
+        out[row, 3] = 0.4886025119029199 * x
+    if order > 2:
+        out[row, 4] = 1.0925484305920792 * x * y
+        out[row, 5] = 1.0925484305920792 * y * z
+        out[row, 6] = 0.31539156525252005 * (3.0 * z * z - 1.0)
+        out[row, 7] = 1.0925484305920792 * x * z
+        out[row, 8] = 0.5462742152960396 * (x * x - y * y)
+    if order > 3:
+        out[row, 9] = 0.5900435899266435 * y * (3.0 * x * x - y * y)
+        out[row, 10] = 2.890611442640554 * x * y * z
+        out[row, 11] = 0.4570457994644658 * y * (5.0 * z * z - 1.0)
+        out[row, 12] = 0.3731763325901154 * z * (5.0 * z * z - 3.0)
+        out[row, 13] = 0.4570457994644658 * x * (5.0 * z * z - 1.0)
+        out[row, 14] = 1.445305721320277 * z * (x * x - y * y)
+        out[row, 15] = 0.5900435899266435 * x * (x * x - 3.0 * y * y)
+
+
+@wp.kernel
+def sh_basis_fast_kernel(
+    dirs: wp.array(dtype=wp.vec3),  # In: (N,) directions, any length
+    order: int,  # In: bands, 1..MAX_KERNEL_ORDER
+    out: wp.array2d(dtype=wp.float32),  # Out: (N, order^2) basis values y_i(dirs[k])
+):
+    k = wp.tid()
+    sh_basis_fast(dirs[k], order, out, k)
+
+
 @wp.kernel
 def sh_basis_kernel(
     dirs: wp.array(dtype=wp.vec3),  # In: (N,) directions, any length
@@ -83,10 +134,11 @@ def sh_basis_kernel(
     sh_basis(dirs[k], order, out, k)
 
 
-def eval_basis(dirs: np.ndarray, order: int, device) -> np.ndarray:
+def eval_basis(dirs: np.ndarray, order: int, device, *, fast: bool = False) -> np.ndarray:
     """SH basis of ``dirs`` (N, 3) (or one direction (3,)) evaluated by the float32 kernel on ``device``.
 
     Returns (N, order^2) float32 numpy.  ValueError unless 1 <= order <= MAX_KERNEL_ORDER and dirs is (N, 3).
+    ``fast``: through ``sh_basis_fast`` (closed forms up to order 4).
     """
     if isinstance(order, bool) or int(order) != order or not 1 <= order <= MAX_KERNEL_ORDER:
         raise ValueError(f"order {order!r}: the float32 SH kernels offer orders 1..{MAX_KERNEL_ORDER}")
@@ -99,5 +151,6 @@ def eval_basis(dirs: np.ndarray, order: int, device) -> np.ndarray:
     out = wp.zeros((len(d), order * order), dtype=wp.float32, device=device)
     if len(d):
         wdirs = wp.array(np.ascontiguousarray(d), dtype=wp.vec3, device=device)
-        wp.launch(sh_basis_kernel, dim=len(d), inputs=[wdirs, order], outputs=[out], device=device)
+        kernel = sh_basis_fast_kernel if fast else sh_basis_kernel
+        wp.launch(kernel, dim=len(d), inputs=[wdirs, order], outputs=[out], device=device)
     return out.numpy()

@@ -395,7 +395,8 @@ class Runtime:
     # -- errors ------------------------------------------------------------------------------------------------
     def node_errors(self, nodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For internal ``nodes`` (K,): culled (K,) bool (T-13 back-facing or outside the frustum), error (K,)
-        ``alpha e_geo + (1 - alpha) e_lumi`` (T-14), e_geo (K,), e_lumi (K,); float32 Warp kernel
+        ``alpha e_geo + (1 - alpha) e_lumi`` (T-14), e_geo (K,), e_lumi (K,) (all 0 where culled: a culled node
+        is coarsened whatever its error); float32 Warp kernel
         (``lodprt.kernels.runtime.view_errors``) on the Runtime's device."""
         from lodprt.kernels import runtime as kr
 
@@ -464,6 +465,7 @@ class Runtime:
             hi += (mid + rad) * w
             lo += (mid - rad) * w
         e_lumi = np.clip((display(hi) - display(lo)).max(1), 0.0, 1.0)
+        e_geo, e_lumi = np.where(culled, 0.0, e_geo), np.where(culled, 0.0, e_lumi)  # culled: no error computed
         err = self.alpha * e_geo + (1.0 - self.alpha) * e_lumi
         return culled, err, e_geo, e_lumi
 

@@ -213,7 +213,9 @@ def test_lumi_error_bounds_the_leaf_spread(store):
     r.set_camera(orbit_camera(r, 0.4))
     r.set_lights([store.light_positions[1] * 0.6 + store.light_positions[4] * 0.4])
     nodes = np.random.default_rng(1).choice(np.arange(r.h.num_vertices, r.h.num_nodes), 400, replace=False)
-    _, _, _, lumi = r.node_errors_reference(nodes)
+    culled, _, _, lumi = r.node_errors_reference(nodes)
+    nodes, lumi = nodes[~culled], lumi[~culled]  # culled nodes get no error (they are coarsened regardless)
+    assert len(nodes) > 100
     coef = r.coefficients()
     tight = 0
     for k, e in zip(nodes, lumi):
@@ -222,7 +224,7 @@ def test_lumi_error_bounds_the_leaf_spread(store):
         spread = float((display(rad.max(0)) - display(rad.min(0))).max())
         assert e >= spread - 2e-3, (k, e, spread)
         tight += e < spread + 0.05
-    assert tight > 100  # a bound, but not a loose one: within 0.05 for many nodes
+    assert tight > len(nodes) // 4  # a bound, but not a loose one: within 0.05 for many nodes
     dark = np.flatnonzero(np.abs(r.box_centre).max((1, 2, 3)) + np.abs(r.box_half).max((1, 2, 3)) == 0)
     if len(dark):
         assert (r.node_errors_reference(dark[:50] + r.h.num_vertices)[3] == 0).all()

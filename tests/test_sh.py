@@ -107,6 +107,16 @@ def test_float32_kernel_matches_float64(device, order):
     np.testing.assert_allclose(y[-4], sh.basis([0, 0, 1], order), rtol=0, atol=1e-5)
 
 
+@pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 8])
+def test_closed_form_kernel_basis_matches_float64(device, order):
+    """sh_basis_fast (closed-form polynomials for l <= 3, the recurrence above) equals the float64 reference."""
+    extra = [[0, 0, 0], [1e-30, 0, 0], [0, 1e-20, -1e-20], [3e5, -4e5, 1e5], [0, 0, -1], [1, 0, 0]]
+    d = np.vstack([directions(400), extra])
+    y = ksh.eval_basis(d, order, device, fast=True)
+    assert np.isfinite(y).all()
+    np.testing.assert_allclose(y, sh.basis(d, order), rtol=0, atol=2e-6)
+
+
 def test_kernel_rejects_bad_order_and_shape():
     """eval_basis refuses orders outside 1..MAX_KERNEL_ORDER and directions that are not (N, 3)."""
     for order in (0, ksh.MAX_KERNEL_ORDER + 1):
