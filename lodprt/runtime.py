@@ -226,6 +226,8 @@ class Runtime:
         self.cut = Cut.base(h, self.faces) if self.lod else Cut.full(h, self.faces)
         self._converged_once = False
         self._blocker = np.full(h.num_nodes, -1, np.int64)  # a finer neighbour that blocked this collapse
+        self._fails = np.zeros(h.num_nodes, np.int8)  # failed collapses in a row, and when to try again
+        self._retry_at = np.zeros(h.num_nodes, np.int64)
         # faces around each original vertex (CSR), for the incremental triangulation
         fv = self.faces.ravel()
         order = np.argsort(fv, kind="stable")
@@ -351,6 +353,8 @@ class Runtime:
         self.cut = Cut.base(self.h, self.faces) if self.lod else Cut.full(self.h, self.faces)
         self._converged_once = False
         self._blocker[:] = -1
+        self._fails[:] = 0
+        self._retry_at[:] = 0
         self._dirty = True
 
     def set_lights(self, positions, colors=None) -> None:
@@ -470,8 +474,10 @@ class Runtime:
         return culled, err, e_geo, e_lumi
 
     # -- frames ------------------------------------------------------------------------------------------------
-    def _pass(self) -> tuple[int, int, int]:
-        """One refinement pass over the candidate lists; returns (refined, coarsened, nodes touched)."""
+    def _pass(self, *, backoff: bool = False) -> tuple[int, int, int]:
+        """One refinement pass over the candidate lists; returns (refined, coarsened, nodes touched). With
+        ``backoff``, a collapse that failed is not tried again for 2, 4, ... 32 frames (it costs a scan of the
+        node's subtree, and the large ones are mostly culled regions)."""
         h, cut = self.h, self.cut
         V = h.num_vertices
         act = np.flatnonzero(cut.active)
@@ -498,10 +504,14 @@ class Runtime:
         todo = cc[want_coarsen]
         blk = self._blocker[todo]
         todo = todo[(blk < 0) | ~cut.active[np.maximum(blk, 0)]]
+        if backoff:
+            todo = todo[self._retry_at[todo] <= self._frame]
         touched += len(todo)
         if len(todo):
             done, blocker = cut.coarsen_many(todo)
             self._blocker[todo] = np.where(done, -1, blocker)
+            self._fails[todo] = np.where(done, 0, np.minimum(self._fails[todo] + 1, 5))
+            self._retry_at[todo] = self._frame + np.where(done, 0, 2 ** self._fails[todo].astype(np.int64))
             coarsened += int(done.sum())
         split = rc[want_refine]
         split = split[np.argsort(-err[:k][want_refine], kind="stable")]
@@ -526,7 +536,7 @@ class Runtime:
             limit = max_passes if max_passes is not None else (self.max_passes if self._converged_once else 10_000)
             self._settled = False
             for _ in range(int(limit)):
-                r, c, t = self._pass()
+                r, c, t = self._pass(backoff=self._converged_once and limit <= self.max_passes)
                 passes += 1
                 refined, coarsened, touched = refined + r, coarsened + c, touched + t
                 if r == 0 and c == 0:
