@@ -54,6 +54,8 @@ log = logging.getLogger(__name__)
 
 #: rounds of forced refinement per pass after the first frame (each round splits what its dependencies allow)
 FORCE_ROUNDS = 24
+#: a failed collapse of a node with more original edges under it than this backs off for a few frames
+BACKOFF_EDGES = 20_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -227,6 +229,8 @@ class Runtime:
         self._converged_once = False
         self._blocker = np.full(h.num_nodes, -1, np.int64)  # a finer neighbour that blocked this collapse
         self._fails = np.zeros(h.num_nodes, np.int8)  # failed collapses in a row, and when to try again
+        lr = h.leaf_range
+        self._subtree_edges = self.cut._ptr[lr[:, 1]] - self.cut._ptr[lr[:, 0]]
         self._retry_at = np.zeros(h.num_nodes, np.int64)
         # faces around each original vertex (CSR), for the incremental triangulation
         fv = self.faces.ravel()
@@ -476,8 +480,9 @@ class Runtime:
     # -- frames ------------------------------------------------------------------------------------------------
     def _pass(self, *, backoff: bool = False) -> tuple[int, int, int]:
         """One refinement pass over the candidate lists; returns (refined, coarsened, nodes touched). With
-        ``backoff``, a collapse that failed is not tried again for 2, 4, ... 32 frames (it costs a scan of the
-        node's subtree, and the large ones are mostly culled regions)."""
+        ``backoff``, a failed collapse of a node whose subtree has more than BACKOFF_EDGES original edges is not
+        tried again for 2, 4, ... 32 frames (a try scans them all); smaller ones are tried again as soon as their
+        blocker has gone."""
         h, cut = self.h, self.cut
         V = h.num_vertices
         act = np.flatnonzero(cut.active)
@@ -510,8 +515,9 @@ class Runtime:
         if len(todo):
             done, blocker = cut.coarsen_many(todo)
             self._blocker[todo] = np.where(done, -1, blocker)
-            self._fails[todo] = np.where(done, 0, np.minimum(self._fails[todo] + 1, 5))
-            self._retry_at[todo] = self._frame + np.where(done, 0, 2 ** self._fails[todo].astype(np.int64))
+            big = self._subtree_edges[todo] > BACKOFF_EDGES
+            self._fails[todo] = np.where(done | ~big, 0, np.minimum(self._fails[todo] + 1, 5))
+            self._retry_at[todo] = self._frame + np.where(done | ~big, 0, 2 ** self._fails[todo].astype(np.int64))
             coarsened += int(done.sum())
         split = rc[want_refine]
         split = split[np.argsort(-err[:k][want_refine], kind="stable")]
