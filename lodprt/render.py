@@ -556,8 +556,8 @@ def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = 
         from lodprt.lights import LightInterpolator
 
         interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"])
+        lights = interp.clamp(lights)[0]  # warns once
         idx, w, _ = interp.weights(lights)
-        lights = interp.clamp(lights)[0]
         mixes = list(zip(idx, w))
     colors = np.broadcast_to(store.intensity if colors is None else np.asarray(colors, np.float64),
                              lights.shape).astype(np.float64)

@@ -377,11 +377,12 @@ class Runtime:
                 col = col[None, :]
             if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
                 raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
-        idx, w, moved = self.interp.weights(pos)
+        pos, moved = self.interp.clamp(pos)  # warns (or refuses) once per call
+        idx, w, _ = self.interp.weights(pos)
         W = np.zeros((len(self.interp.samples), 3))
         np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))  # lights add (thesis 3.4.1)
         self._dirty = True
-        self.light_positions = self.interp.clamp(pos)[0]
+        self.light_positions = pos
         self.light_colors = col
         self.lights_clamped = int(moved.sum())
         self.sample_weights = W
