@@ -415,9 +415,9 @@ def _cmd_radiance(args) -> int:
     else:
         if args.color is not None and len(args.color) != len(args.light):
             raise LodprtError(f"--color: {len(args.color)} given for {len(args.light)} --light; give one per light or none")
-        rt = _runtime(store, outside=args.outside, lod=False)
-        rt.set_lights(args.light, colors=args.color)
-        rad = rt.radiance(args.eye)
+        from lodprt.runtime import light_radiance
+
+        rad = light_radiance(store, args.light, args.eye, colors=args.color, outside=args.outside)
     np.save(out, rad)
     print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
     return 0

@@ -656,6 +656,30 @@ class Runtime:
             raise LodprtError(f"the view cut violates {len(bad)} dependencies, e.g. nodes {bad[0].tolist()}")
 
 
+def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp") -> np.ndarray:
+    """(V, 3) float32 radiance toward ``eye`` of every vertex of ``store`` under point lights at (L, 3) positions
+    (T-12 interpolation, T-15 completion, lights summed with their RGB intensities; default the bake's), without a
+    ``Runtime``: works for stores baked without a hierarchy too. ``Runtime.radiance`` gives the same numbers."""
+    from lodprt.store import radiance_toward
+
+    interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting=weighting,
+                               outside=outside)
+    pos, _ = interp.clamp(lights)
+    col = np.repeat(np.asarray(store.intensity, np.float64)[None, :], len(pos), 0) if colors is None \
+        else np.asarray(colors, np.float64).reshape(-1, 3)
+    if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
+        raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
+    idx, w, _ = interp.weights(pos)
+    W = np.zeros((store.num_samples, 3))
+    np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))
+    out = None
+    for j in np.flatnonzero(np.abs(W).sum(1) > 0):
+        c = store.coefficients(int(j))  # (V, C, ncoef), completed
+        term = c * W[j][None, :, None] if c.shape[1] == 3 else c[:, :1] * W[j][None, :, None]
+        out = term if out is None else out + term
+    return radiance_toward(store.positions, store.normals, out, eye, np.ones(3))
+
+
 def object_bounds(store) -> np.ndarray:
     """(2, 3) bounds of the scene's objects without the floor (all referenced vertices when only a floor)."""
     pos = np.asarray(store.positions)

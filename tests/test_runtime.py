@@ -306,3 +306,23 @@ def test_cli_frames_json(bunny_bake, capsys):
     assert all(0 < f["triangles"] < doc["summary"]["full_triangles"] for f in doc["frames"])
     assert doc["summary"]["median_ms"] > 0
     assert main(["frames", str(bunny_bake), "--frames", "0"]) == 2
+
+
+def test_light_radiance_without_a_runtime(store, bunny_floor, tmp_path):
+    """light_radiance equals Runtime.radiance, and works on a store baked without a hierarchy (full bake)."""
+    from lodprt.bake import bake
+    from lodprt.runtime import light_radiance
+
+    x = [0.4 * store.light_positions[2] + 0.6 * store.light_positions[7]]
+    r = Runtime(store, lod=False)
+    r.set_lights(x, colors=[(0.3, 0.6, 0.9)])
+    want = r.radiance((0.1, 0.3, 0.7))
+    got = light_radiance(store, x, (0.1, 0.3, 0.7), colors=[(0.3, 0.6, 0.9)])
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    flat = tmp_path / "flat.zarr"
+    bake(bunny_floor, flat, sh_order=2, device="cpu", hierarchy=False)
+    plain = open_store(flat)
+    rad = light_radiance(plain, x, (0.1, 0.3, 0.7))
+    assert rad.shape == (plain.num_vertices, 3) and np.isfinite(rad).all() and rad.max() > 0
+    with pytest.raises(LodprtError, match="hierarchy"):
+        Runtime(plain)
