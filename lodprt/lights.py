@@ -89,3 +89,11 @@ class LightInterpolator:
         total = w.sum(1, keepdims=True)
         w = np.where(total > 0, w / np.where(total > 0, total, 1.0), 1.0 / self.k)  # all equidistant: equal
         return idx, w, moved
+
+    def rgb_weights(self, lights, colors) -> np.ndarray:
+        """(S, 3) factor of every light sample for (L, 3) lights inside the region with (L, 3) RGB intensities:
+        ``W[j, c] = sum_l colors[l, c] w_lj`` (several lights add, thesis 3.4.1)."""
+        idx, w, _ = self.weights(lights)
+        W = np.zeros((len(self.samples), 3))
+        np.add.at(W, idx.ravel(), (w[:, :, None] * np.asarray(colors, np.float64)[:, None, :]).reshape(-1, 3))
+        return W

@@ -378,9 +378,7 @@ class Runtime:
             if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
                 raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
         pos, moved = self.interp.clamp(pos)  # warns (or refuses) once per call
-        idx, w, _ = self.interp.weights(pos)
-        W = np.zeros((len(self.interp.samples), 3))
-        np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))  # lights add (thesis 3.4.1)
+        W = self.interp.rgb_weights(pos, col)  # lights add (thesis 3.4.1)
         self._dirty = True
         self.light_positions = pos
         self.light_colors = col
@@ -669,9 +667,7 @@ def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact",
         else np.asarray(colors, np.float64).reshape(-1, 3)
     if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
         raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
-    idx, w, _ = interp.weights(pos)
-    W = np.zeros((store.num_samples, 3))
-    np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))
+    W = interp.rgb_weights(pos, col)
     out = None
     for j in np.flatnonzero(np.abs(W).sum(1) > 0):
         c = store.coefficients(int(j))  # (V, C, ncoef), completed
