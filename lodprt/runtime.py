@@ -128,19 +128,6 @@ def clip_planes(view_proj: np.ndarray) -> np.ndarray:
     return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
 
 
-def near_far(camera: Camera, bounds: np.ndarray) -> tuple[float, float]:
-    """The camera's near and far distances; unset ones from the scene's bounds (2, 3): far just beyond the
-    farthest corner, near at the box when the eye is outside it, else far * 1e-4."""
-    eye = np.asarray(camera.eye)
-    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    far = camera.far if camera.far is not None else 1.01 * float(np.linalg.norm(corners - eye, axis=1).max())
-    far = max(far, 1e-30)
-    if camera.near is not None:
-        return float(camera.near), float(far)
-    gap = float(np.linalg.norm(np.maximum(np.maximum(bounds[0] - eye, eye - bounds[1]), 0.0)))
-    return max(0.9 * gap, far * 1e-4), float(far)
-
-
 def _as_camera(camera=None, **kw) -> Camera:
     if isinstance(camera, Camera):
         if kw:
@@ -155,11 +142,13 @@ def _as_camera(camera=None, **kw) -> Camera:
 
 
 def view_projection(camera: Camera, bounds: np.ndarray) -> np.ndarray:
-    """4x4 projection @ view of ``camera`` (OpenGL clip space; near/far from ``near_far``)."""
-    from lodprt.render import look_at, perspective
+    """4x4 projection @ view of ``camera`` (OpenGL clip space), with the renderer's near and far planes
+    (``lodprt.render.camera_matrices``) for the scene's bounds (2, 3): the cut culls with the planes that draw."""
+    from lodprt.render import camera_matrices
 
-    near, far = near_far(camera, bounds)
-    return perspective(camera.fov, camera.width / camera.height, near, far) @ look_at(camera.eye, camera.target, camera.up)
+    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    view, proj = camera_matrices(camera, corners)
+    return proj @ view
 
 
 class Runtime:
