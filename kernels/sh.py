@@ -115,23 +115,17 @@ def sh_basis_fast(
 
 
 @wp.kernel
-def sh_basis_fast_kernel(
-    dirs: wp.array(dtype=wp.vec3),  # In: (N,) directions, any length
-    order: int,  # In: bands, 1..MAX_KERNEL_ORDER
-    out: wp.array2d(dtype=wp.float32),  # Out: (N, order^2) basis values y_i(dirs[k])
-):
-    k = wp.tid()
-    sh_basis_fast(dirs[k], order, out, k)
-
-
-@wp.kernel
 def sh_basis_kernel(
     dirs: wp.array(dtype=wp.vec3),  # In: (N,) directions, any length
     order: int,  # In: bands, 1..MAX_KERNEL_ORDER
+    fast: int,  # In: 1 through sh_basis_fast (closed forms up to order 4), 0 through the recurrence
     out: wp.array2d(dtype=wp.float32),  # Out: (N, order^2) basis values y_i(dirs[k])
 ):
     k = wp.tid()
-    sh_basis(dirs[k], order, out, k)
+    if fast != 0:
+        sh_basis_fast(dirs[k], order, out, k)
+    else:
+        sh_basis(dirs[k], order, out, k)
 
 
 def eval_basis(dirs: np.ndarray, order: int, device, *, fast: bool = False) -> np.ndarray:
@@ -151,6 +145,5 @@ def eval_basis(dirs: np.ndarray, order: int, device, *, fast: bool = False) -> n
     out = wp.zeros((len(d), order * order), dtype=wp.float32, device=device)
     if len(d):
         wdirs = wp.array(np.ascontiguousarray(d), dtype=wp.vec3, device=device)
-        kernel = sh_basis_fast_kernel if fast else sh_basis_kernel
-        wp.launch(kernel, dim=len(d), inputs=[wdirs, order], outputs=[out], device=device)
+        wp.launch(sh_basis_kernel, dim=len(d), inputs=[wdirs, order, int(bool(fast))], outputs=[out], device=device)
     return out.numpy()
