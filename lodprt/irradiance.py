@@ -241,15 +241,6 @@ void main() { f_col = vec4(v_e, 1.0); }
 """
 
 
-def _context():
-    import moderngl
-
-    try:
-        return moderngl.create_standalone_context(backend="egl")
-    except Exception as exc:  # no EGL display: say so instead of a deep traceback
-        raise LodprtError(f"cannot create an offscreen OpenGL context (EGL): {exc}") from exc
-
-
 def _set_registers(prog, coeffs) -> None:
     for name, value in shader_constants(coeffs).items():
         if name in prog:
@@ -264,9 +255,11 @@ def irradiance_gl(normals, coeffs) -> np.ndarray:
     n = _normals(normals).reshape(-1, 3).astype(np.float32)
     if len(n) == 0:
         return np.zeros((0, 3), np.float32)
+    from lodprt.render import create_context
+
     width = min(len(n), 1024)
     height = -(-len(n) // width)
-    ctx = _context()
+    ctx = create_context()
     try:
         prog = ctx.program(vertex_shader=_POINTS_VS, fragment_shader=_POINTS_FS)
         _set_registers(prog, coeffs)
@@ -321,35 +314,19 @@ def render_irradiance(positions, triangles, normals, coeffs, *, albedo=(0.8, 0.8
     ``exposure``, clipped to [0, 1] and sRGB-encoded in the fragment shader. Returns (H, W, 3) uint8, first row
     on top; camera as in :func:`lodprt.render.render`.
     """
-    import moderngl
+    from lodprt.render import check_size, create_context, draw_mesh, fit_mvp
 
-    from lodprt.render import look_at, perspective
-
-    width, height = (int(x) for x in size)
-    if width < 1 or height < 1:
-        raise LodprtError(f"size {size}: width and height must be >= 1")
+    size = check_size(size)
     pos = np.asarray(positions, np.float32)
     nrm = np.asarray(normals, np.float32)
     alb = np.broadcast_to(np.asarray(albedo, np.float32), pos.shape).astype(np.float32)
-    tri = np.asarray(triangles, np.int32)
-    radius = float(np.linalg.norm(pos.max(0) - pos.min(0))) or 1.0
-    dist = float(np.linalg.norm(np.asarray(eye, float) - np.asarray(target, float)))
-    mvp = perspective(fov, width / height, max(dist - 2 * radius, dist * 1e-3), dist + 2 * radius) @ look_at(eye, target, up)
-    ctx = _context()
+    mvp = fit_mvp(pos, eye=eye, target=target, up=up, fov=fov, size=size)
+    ctx = create_context()
     try:
         prog = ctx.program(vertex_shader=_SHADE_VS, fragment_shader=_SHADE_FS)
         _set_registers(prog, coeffs)
-        prog["mvp"].write(mvp.T.astype(np.float32).tobytes())
         prog["exposure"].value = float(exposure)
-        vbo = ctx.buffer(np.hstack([pos, nrm, alb]).astype(np.float32).tobytes())
-        ibo = ctx.buffer(tri.tobytes())
-        vao = ctx.vertex_array(prog, [(vbo, "3f 3f 3f", "in_pos", "in_normal", "in_albedo")], index_buffer=ibo)
-        fbo = ctx.simple_framebuffer((width, height), components=3)
-        fbo.use()
-        ctx.enable(moderngl.DEPTH_TEST)
-        fbo.clear(*background, depth=1.0)
-        vao.render(moderngl.TRIANGLES)
-        img = np.frombuffer(fbo.read(components=3), np.uint8).reshape(height, width, 3)
-        return img[::-1].copy()
+        return draw_mesh(prog, np.hstack([pos, nrm, alb]), ("3f 3f 3f", "in_pos", "in_normal", "in_albedo"),
+                         triangles, mvp, size, background)
     finally:
         ctx.release()

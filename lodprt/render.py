@@ -66,37 +66,56 @@ def perspective(fov_deg: float, aspect: float, near: float, far: float) -> np.nd
     return m
 
 
-def render(positions, triangles, colors, *, eye, target, up=(0.0, 1.0, 0.0), fov=40.0, size=(800, 600),
-           background=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Render triangles (M, 3) over positions (V, 3) with per-vertex colours (V, 3) in [0, 1]: (H, W, 3) uint8."""
+def fit_mvp(positions, *, eye, target, up, fov: float, size) -> np.ndarray:
+    """4x4 projection @ view for the simple mesh renders: near and far bracket the positions' bounding sphere."""
+    pos = np.asarray(positions, np.float64)
+    radius = float(np.linalg.norm(pos.max(0) - pos.min(0))) if len(pos) else 0.0
+    radius = radius or 1.0
+    dist = float(np.linalg.norm(np.asarray(eye, float) - np.asarray(target, float)))
+    width, height = size
+    return perspective(fov, width / height, max(dist - 2 * radius, dist * 1e-3), dist + 2 * radius) @ look_at(eye, target, up)
+
+
+def draw_mesh(prog, vertices: np.ndarray, layout: tuple, triangles, mvp: np.ndarray, size, background) -> np.ndarray:
+    """Draw indexed triangles with ``prog`` (its uniforms already set but ``mvp``) on ``prog.ctx`` into a new RGB8
+    framebuffer with depth test: (H, W, 3) uint8, first row on top. ``vertices`` (V, k) float32 interleaved as
+    ``layout`` = (format, attribute names...)."""
     import moderngl
 
+    ctx = prog.ctx
+    width, height = size
+    prog["mvp"].write(np.asarray(mvp).T.astype(np.float32).tobytes())  # column-major
+    vbo = ctx.buffer(np.ascontiguousarray(vertices, np.float32).tobytes())
+    ibo = ctx.buffer(np.asarray(triangles, np.int32).tobytes())
+    vao = ctx.vertex_array(prog, [(vbo, *layout)], index_buffer=ibo)
+    fbo = ctx.simple_framebuffer((width, height), components=3)
+    fbo.use()
+    ctx.enable(moderngl.DEPTH_TEST)
+    fbo.clear(*background, depth=1.0)
+    vao.render(moderngl.TRIANGLES)
+    img = np.frombuffer(fbo.read(components=3), np.uint8).reshape(height, width, 3)
+    return img[::-1].copy()  # OpenGL's first row is the bottom
+
+
+def check_size(size) -> tuple[int, int]:
+    """(width, height) as ints, LodprtError unless both are >= 1."""
     width, height = (int(x) for x in size)
     if width < 1 or height < 1:
         raise LodprtError(f"size {size}: width and height must be >= 1")
+    return width, height
+
+
+def render(positions, triangles, colors, *, eye, target, up=(0.0, 1.0, 0.0), fov=40.0, size=(800, 600),
+           background=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Render triangles (M, 3) over positions (V, 3) with per-vertex colours (V, 3) in [0, 1]: (H, W, 3) uint8."""
+    size = check_size(size)
     pos = np.asarray(positions, np.float32)
-    tri = np.asarray(triangles, np.int32)
     col = np.clip(np.asarray(colors, np.float32), 0, 1)
-    radius = float(np.linalg.norm(pos.max(0) - pos.min(0))) or 1.0
-    dist = float(np.linalg.norm(np.asarray(eye, float) - np.asarray(target, float)))
-    mvp = perspective(fov, width / height, max(dist - 2 * radius, dist * 1e-3), dist + 2 * radius) @ look_at(eye, target, up)
-    try:
-        ctx = moderngl.create_standalone_context(backend="egl")
-    except Exception as exc:  # no EGL display: say so instead of a deep traceback
-        raise LodprtError(f"cannot create an offscreen OpenGL context (EGL): {exc}") from exc
+    mvp = fit_mvp(pos, eye=eye, target=target, up=up, fov=fov, size=size)
+    ctx = create_context()
     try:
         prog = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
-        prog["mvp"].write(mvp.T.astype(np.float32).tobytes())  # column-major
-        vbo = ctx.buffer(np.hstack([pos, col]).astype(np.float32).tobytes())
-        ibo = ctx.buffer(tri.tobytes())
-        vao = ctx.vertex_array(prog, [(vbo, "3f 3f", "in_pos", "in_col")], index_buffer=ibo)
-        fbo = ctx.simple_framebuffer((width, height), components=3)
-        fbo.use()
-        ctx.enable(moderngl.DEPTH_TEST)
-        fbo.clear(*background, depth=1.0)
-        vao.render(moderngl.TRIANGLES)
-        img = np.frombuffer(fbo.read(components=3), np.uint8).reshape(height, width, 3)
-        return img[::-1].copy()  # OpenGL's first row is the bottom
+        return draw_mesh(prog, np.hstack([pos, col]), ("3f 3f", "in_pos", "in_col"), triangles, mvp, size, background)
     finally:
         ctx.release()
 
@@ -330,7 +349,7 @@ def create_context(backend: str = "egl"):
     try:
         return moderngl.create_standalone_context(require=330, backend=backend)
     except Exception as exc:
-        raise LodprtError(f"cannot create an offscreen OpenGL 3.3 context ({backend}): {exc}") from exc
+        raise LodprtError(f"cannot create an offscreen OpenGL 3.3 context ({backend.upper()}): {exc}") from exc
 
 
 class Renderer:
