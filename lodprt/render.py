@@ -557,39 +557,29 @@ def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = 
     """A ``lodprt.runtime.Frame`` with every referenced vertex of ``store`` and its completed coefficients.
 
     Either ``sample`` (one light exactly at light sample K, that sample's coefficients) or ``lights`` (L, 3)
-    positions, each interpolated from its nearest samples (T-12, ``lodprt.lights.LightInterpolator``: the run
-    time's weights, clamped into the sampled region). ``colors`` (L, 3) RGB
+    positions, each interpolated from its nearest samples (``lodprt.runtime.light_coefficients``: the run time's
+    T-12 weights, clamped into the sampled region). ``colors`` (L, 3) RGB
     intensities (default the store's); the frame's coefficients carry them (linear radiance).
     """
-    from lodprt.runtime import Frame
+    from lodprt.runtime import Frame, light_coefficients
     from lodprt.store import radiance_toward
 
-    if sample is not None:
-        store.check_sample(sample)
-        lights = store.light_positions[sample][None, :]
-        mixes = [(np.array([sample]), np.array([1.0]))]
-    else:
-        lights = np.asarray(lights, np.float64).reshape(-1, 3)
-        if not len(lights) or not np.isfinite(lights).all():
-            raise LodprtError(f"lights: expected (L, 3) finite positions, L >= 1, got {lights.tolist()}")
-        from lodprt.lights import LightInterpolator
-
-        interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"])
-        lights = interp.clamp(lights)[0]  # warns once
-        idx, w, _ = interp.weights(lights)
-        mixes = list(zip(idx, w))
-    colors = np.broadcast_to(store.intensity if colors is None else np.asarray(colors, np.float64),
-                             lights.shape).astype(np.float64)
     faces = store.faces
     ids = np.unique(faces.ravel()).astype(np.int32)
     remap = np.full(store.num_vertices, -1, np.int64)
     remap[ids] = np.arange(len(ids))
-    ncoef = store.sh_order ** 2
-    coeffs = np.zeros((len(ids), 3, ncoef), np.float64)
-    for (idx, w), rgb in zip(mixes, colors):
-        for k, wk in zip(idx, w):
-            if wk > 0:
-                coeffs += wk * store.coefficients(int(k))[ids] * rgb[None, :, None]
+    if sample is not None:
+        store.check_sample(sample)
+        lights = store.light_positions[sample][None, :].astype(np.float64)
+        colors = np.broadcast_to(store.intensity if colors is None else np.asarray(colors, np.float64),
+                                 lights.shape).astype(np.float64)
+        coeffs = store.coefficients(sample)[ids] * colors[0][None, :, None]
+    else:
+        lights = np.asarray(lights, np.float64).reshape(-1, 3)
+        if not len(lights) or not np.isfinite(lights).all():
+            raise LodprtError(f"lights: expected (L, 3) finite positions, L >= 1, got {lights.tolist()}")
+        lights, colors, coeffs = light_coefficients(store, lights, colors=colors)
+        coeffs = coeffs[ids]
     pos = store.positions[ids].astype(np.float32)
     nrm = store.normals[ids].astype(np.float32)
     rad = radiance_toward(pos, nrm, coeffs, camera.eye, np.ones(3))

@@ -643,26 +643,36 @@ class Runtime:
             raise LodprtError(f"the view cut violates {len(bad)} dependencies, e.g. nodes {bad[0].tolist()}")
 
 
-def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp") -> np.ndarray:
-    """(V, 3) float32 radiance toward ``eye`` of every vertex of ``store`` under point lights at (L, 3) positions
-    (T-12 interpolation, T-15 completion, lights summed with their RGB intensities; default the bake's), without a
-    ``Runtime``: works for stores baked without a hierarchy too. ``Runtime.radiance`` gives the same numbers."""
-    from lodprt.store import radiance_toward
-
+def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", outside: str = "clamp"):
+    """The completed coefficients of every vertex of ``store`` under point lights at (L, 3) positions, without a
+    ``Runtime`` (stores baked without a hierarchy too): T-12 interpolation, T-15 completion, lights summed with
+    their RGB intensities (``colors`` (L, 3) or one (3,) for all; default the bake's). Returns (lights clamped
+    into the sampled region (L, 3), colours (L, 3), coefficients (V, 3, ncoef) float64)."""
     interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting=weighting,
                                outside=outside)
     pos, _ = interp.clamp(lights)
-    col = np.repeat(np.asarray(store.intensity, np.float64)[None, :], len(pos), 0) if colors is None \
-        else np.asarray(colors, np.float64).reshape(-1, 3)
+    try:
+        col = np.broadcast_to(store.intensity if colors is None else np.asarray(colors, np.float64), pos.shape)
+    except ValueError:
+        col = np.asarray(colors, np.float64)
     if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
         raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
+    col = col.astype(np.float64)
     W = interp.rgb_weights(pos, col)
-    out = None
+    out = np.zeros((store.num_vertices, 3, store.sh_order ** 2))
     for j in np.flatnonzero(np.abs(W).sum(1) > 0):
-        c = store.coefficients(int(j))  # (V, C, ncoef), completed
-        term = c * W[j][None, :, None] if c.shape[1] == 3 else c[:, :1] * W[j][None, :, None]
-        out = term if out is None else out + term
-    return radiance_toward(store.positions, store.normals, out, eye, np.ones(3))
+        c = store.coefficients(int(j))  # (V, C, ncoef), completed; C = 1 (grey) broadcasts over R, G, B
+        out += c * W[j][None, :, None]
+    return pos, col, out
+
+
+def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp") -> np.ndarray:
+    """(V, 3) float32 radiance toward ``eye`` of every vertex of ``store`` under point lights (``light_coefficients``;
+    ``Runtime.radiance`` gives the same numbers)."""
+    from lodprt.store import radiance_toward
+
+    _, _, coeffs = light_coefficients(store, lights, colors=colors, weighting=weighting, outside=outside)
+    return radiance_toward(store.positions, store.normals, coeffs, eye, np.ones(3))
 
 
 def object_bounds(store) -> np.ndarray:
