@@ -1064,6 +1064,13 @@ class Cut:
         idx = np.repeat(lr[:, 0] - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
         self.anc[self.h.leaf_order[idx]] = np.repeat(nodes, n)
 
+    def _split(self, nodes: np.ndarray) -> None:
+        """Make the children of ``nodes`` active in their place (no rule checked: the callers did)."""
+        ch = self.h.children[nodes].ravel()
+        self.active[nodes] = False
+        self.active[ch] = True
+        self._set_leaves(ch)
+
     def refine_many(self, nodes) -> np.ndarray:
         """Split every node of ``nodes`` whose split rule holds now, all at once; returns the (K,) bool mask of the
         nodes split. Simultaneous splits stay legal: a split only replaces a node by children created before it,
@@ -1076,11 +1083,7 @@ class Cut:
             seg, nb = self._edge_segments(cand)
             bad = (nb != cand[seg]) & (h.creation[nb] > h.creation[cand[seg]])
             legal = np.bincount(seg[bad], minlength=len(cand)) == 0
-            go = cand[legal]
-            ch = h.children[go]
-            self.active[go] = False
-            self.active[ch.ravel()] = True
-            self._set_leaves(ch.ravel())
+            self._split(cand[legal])
             ok[np.flatnonzero(ok)[~legal]] = False
         return ok
 
@@ -1134,12 +1137,8 @@ class Cut:
             bad = (nb != scan[seg]) & (h.creation[nb] > h.creation[scan[seg]])
             legal = np.bincount(seg[bad], minlength=len(scan)) == 0
             go = scan[legal]
-            if len(go):
-                ch = h.children[go]
-                self.active[go] = False
-                self.active[ch.ravel()] = True
-                self._set_leaves(ch.ravel())
-                splits += len(go)
+            self._split(go)
+            splits += len(go)
             first = np.full(len(scan), -1, np.int64)
             first[seg[bad][::-1]] = nb[bad][::-1]
             rep[look] = first
