@@ -363,7 +363,7 @@ def _representative_scores(V: int, before: np.ndarray, after: np.ndarray) -> tup
     # every pair (v, u) against every other surviving neighbour w of the same v
     cnt = start[src + 1] - start[src]
     i = np.repeat(np.arange(len(src)), cnt)
-    j = np.repeat(start[src], cnt) + (np.arange(len(i)) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    j = concat_ranges(start[src], start[src + 1])
     u, w = dst[i], dst[j]
     ok = u != w
     lo, hi = np.minimum(u, w), np.maximum(u, w)
@@ -1053,16 +1053,12 @@ class Cut:
         original edge leaving the nodes' leaves (one CSR slice per node, concatenated)."""
         lr = self.h.leaf_range[nodes]
         lo, hi = self._ptr[lr[:, 0]], self._ptr[lr[:, 1]]
-        n = hi - lo
-        idx = np.repeat(lo - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
-        return np.repeat(np.arange(len(nodes)), n), self.anc[self._nbr[idx]]
+        return np.repeat(np.arange(len(nodes)), hi - lo), self.anc[self._nbr[concat_ranges(lo, hi)]]
 
     def _set_leaves(self, nodes: np.ndarray) -> None:
         """anc of every leaf under each of ``nodes`` becomes that node (vectorised over the nodes' slices)."""
         lr = self.h.leaf_range[nodes]
-        n = lr[:, 1] - lr[:, 0]
-        idx = np.repeat(lr[:, 0] - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
-        self.anc[self.h.leaf_order[idx]] = np.repeat(nodes, n)
+        self.anc[self.h.leaf_order[concat_ranges(lr[:, 0], lr[:, 1])]] = np.repeat(nodes, lr[:, 1] - lr[:, 0])
 
     def _split(self, nodes: np.ndarray) -> None:
         """Make the children of ``nodes`` active in their place (no rule checked: the callers did)."""
@@ -1232,6 +1228,19 @@ def active_ancestors(h: Hierarchy, active: np.ndarray) -> np.ndarray:
     return anc.astype(np.int32)
 
 
+def map_faces(h: Hierarchy, faces: np.ndarray, anc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (F, 3) mapped through each vertex's active ancestor to original vertex ids (int32), and (F,) bool:
+    not degenerate (three different vertices)."""
+    f = h.vertex[anc[np.asarray(faces, np.int64)]].astype(np.int32)
+    return f, (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+
+
+def concat_ranges(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The indices ``lo[0]..hi[0]-1, lo[1]..hi[1]-1, ...`` concatenated (int64), vectorised."""
+    n = np.asarray(hi, np.int64) - np.asarray(lo, np.int64)
+    return np.repeat(np.asarray(lo, np.int64) - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
+
+
 def triangulate(h: Hierarchy, faces: np.ndarray, anc: np.ndarray, *, return_index: bool = False):
     """Original faces mapped through each vertex's active ancestor (T-3.2), degenerate faces dropped, vectorised.
 
@@ -1239,8 +1248,7 @@ def triangulate(h: Hierarchy, faces: np.ndarray, anc: np.ndarray, *, return_inde
     original vertex ids (``vertex`` of the active ancestors); with ``return_index`` also the (M,) original face
     of each.
     """
-    f = h.vertex[anc[np.asarray(faces, np.int64)]]
-    keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+    f, keep = map_faces(h, faces, anc)
     if return_index:
         return f[keep].astype(np.int32), np.flatnonzero(keep)
     return f[keep].astype(np.int32)

@@ -47,7 +47,7 @@ import numpy as np
 
 from lodprt import sh
 from lodprt.errors import LodprtError
-from lodprt.hierarchy import Cut
+from lodprt.hierarchy import Cut, concat_ranges, map_faces
 from lodprt.lights import LightInterpolator
 
 log = logging.getLogger(__name__)
@@ -597,21 +597,14 @@ class Runtime:
         the original faces around vertices whose active ancestor changed since the last frame are mapped again."""
         anc = self.cut.anc
         if self._tri_anc is None:
-            f = self.h.vertex[anc[self.faces]]
-            self._fmap = f.astype(np.int32)
-            self._flive = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+            self._fmap, self._flive = map_faces(self.h, self.faces, anc)
         else:
             moved = np.flatnonzero(anc != self._tri_anc)
             if len(moved):
-                lo, hi = self._vf_ptr[moved], self._vf_ptr[moved + 1]
-                n = hi - lo
-                idx = np.repeat(lo - np.cumsum(np.r_[0, n[:-1]]), n) + np.arange(int(n.sum()))
                 mark = np.zeros(len(self.faces), bool)  # faces around the moved vertices (a mask: no sort)
-                mark[self._vf[idx]] = True
+                mark[self._vf[concat_ranges(self._vf_ptr[moved], self._vf_ptr[moved + 1])]] = True
                 fs = np.flatnonzero(mark)
-                f = self.h.vertex[anc[self.faces[fs]]]
-                self._fmap[fs] = f
-                self._flive[fs] = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+                self._fmap[fs], self._flive[fs] = map_faces(self.h, self.faces[fs], anc)
         self._tri_anc = anc.copy()
         return self._fmap[self._flive]
 
