@@ -146,7 +146,8 @@ def main():
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
-    print(f"\nRuntime init (completion of {samples} samples, per-node spreads, upload): {init_s:.1f} s")
+    print(f"\nRuntime init (completion of {samples} samples, upload): {init_s:.1f} s; the first frame also makes "
+          "the per-node coefficient boxes")
     print(table(rows, [("path", "path", "s"), ("mode", "mode", "s"), ("median_triangles", "triangles", ",.0f"),
                        ("median_ms_cut", "cut ms", ".2f"), ("median_ms_triangulate", "tri ms", ".2f"),
                        ("median_ms_relight", "relight ms", ".2f"), ("median_ms_total", "median ms", ".2f"),
