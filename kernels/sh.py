@@ -24,17 +24,24 @@ MAX_KERNEL_ORDER = 32
 
 
 @wp.func
+def unit_direction(d: wp.vec3):
+    """``d`` normalised, scaling by the largest component first so tiny vectors do not underflow to a zero length;
+    a zero vector reads as +z."""
+    big = wp.max(wp.max(wp.abs(d[0]), wp.abs(d[1])), wp.abs(d[2]))
+    u = wp.vec3(0.0, 0.0, 1.0)
+    if big > 0.0:
+        u = wp.normalize(d / big)
+    return u
+
+
+@wp.func
 def sh_basis(
     d: wp.vec3,  # In: direction, any length (normalised here; a zero vector reads as +z)
     order: int,  # In: bands; order^2 values are written
     out: wp.array2d(dtype=wp.float32),  # Out: out[row, i] = y_i(d) for i < order^2
     row: int,  # In: row of out to fill
 ):
-    # normalise, scaling by the largest component first so tiny vectors do not underflow to a zero length
-    big = wp.max(wp.max(wp.abs(d[0]), wp.abs(d[1])), wp.abs(d[2]))
-    u = wp.vec3(0.0, 0.0, 1.0)
-    if big > 0.0:
-        u = wp.normalize(d / big)
+    u = unit_direction(d)
     x = u[0]
     y = u[1]
     z = u[2]
@@ -86,10 +93,7 @@ def sh_basis_fast(
     if order > 4:
         sh_basis(d, order, out, row)
         return
-    big = wp.max(wp.max(wp.abs(d[0]), wp.abs(d[1])), wp.abs(d[2]))
-    u = wp.vec3(0.0, 0.0, 1.0)
-    if big > 0.0:
-        u = wp.normalize(d / big)
+    u = unit_direction(d)
     x = u[0]
     y = u[1]
     z = u[2]
