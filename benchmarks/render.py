@@ -1,14 +1,16 @@
 """Offscreen frames per second with and without the view-dependent cut, at 512x512 and 1024x1024.
 
-    python benchmarks/render.py [--quick] [--json PATH] [--store OUT.zarr]
+    python benchmarks/render.py [--quick] [--json PATH] [--store OUT.zarr] [--device cpu|cuda]
 
 Scene: the shared Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 5
 degrees, baked here into a temporary store (quick: 100 x 100 floor, 2 x 1 x 1 samples) unless --store names one.
 Each frame the camera orbits 1 degree about the bunny and a light moves, so the run time moves its cut and
-relights every frame; "update" is ``Runtime.update()`` (cut, triangulation, relighting), "draw" is
-``Renderer.draw`` of the new frame into the offscreen EGL framebuffer (coefficient upload, per-fragment SH
-radiance from interpolated coefficients, tone mapping) until ``glFinish``. Baseline in the same run: the full mesh
-(LOD off, every vertex, same lights and camera path). The GL renderer (llvmpipe on CPU machines) is recorded.
+relights every frame; "update" is ``set_camera`` + ``set_lights`` + ``Runtime.update()`` (cut, triangulation,
+relighting), "draw" is ``Renderer.draw`` of the new frame into the offscreen EGL framebuffer (coefficient upload,
+SH radiance per fragment from interpolated coefficients, or per vertex, tone mapping) until ``glFinish``. Baseline
+in the same run: the full mesh (LOD off, every vertex, same lights and camera path). Recorded: the GL renderer
+(llvmpipe on CPU machines) and the Warp device the bake and the run time's kernels used (``--device``; default:
+CUDA when present, else the CPU, as ``lodprt.devices.resolve_device`` decides).
 """
 
 from __future__ import annotations
@@ -24,11 +26,11 @@ import numpy as np
 from common import environment, parser, plot_path, table, thesis_scene, write
 
 
-def build_store(quick: bool, folder: Path) -> Path:
+def build_store(quick: bool, folder: Path, device: str) -> Path:
     from lodprt.bake import bake
 
     path = folder / "render-bench.zarr"
-    bake(thesis_scene(quick=quick), path, sh_order=4, device="cpu", threshold_deg=5.0)
+    bake(thesis_scene(quick=quick), path, sh_order=4, device=device, threshold_deg=5.0)
     return path
 
 
@@ -62,14 +64,16 @@ def main():
     p = parser(__doc__.splitlines()[0])
     p.add_argument("--store", default=None, help="use this bake store instead of baking the thesis scene")
     args = p.parse_args()
+    from lodprt.devices import resolve_device
     from lodprt.render import Renderer, scene_centre
     from lodprt.runtime import Camera
     from lodprt.store import open_store
 
+    device = resolve_device(args.device)  # refuse an unavailable device before baking
     tmp = Path(tempfile.mkdtemp(prefix="lodprt-render-bench-"))
     try:
         t = time.perf_counter()
-        path = Path(args.store) if args.store else build_store(args.quick, tmp)
+        path = Path(args.store) if args.store else build_store(args.quick, tmp, device)
         store = open_store(path)
         nv = store.num_vertices
         print(f"store {path.name}: {store.num_vertices:,} vertices ({time.perf_counter() - t:.0f} s)", flush=True)
@@ -79,7 +83,7 @@ def main():
         frames = 3 if args.quick else 10
         sizes = [(512, 512), (1024, 1024)]
         rows = []
-        rt = store.runtime()
+        rt = store.runtime(device=device)
         with Renderer() as renderer:
             gl = renderer.ctx.info["GL_RENDERER"]
             for size in sizes:
@@ -98,7 +102,8 @@ def main():
                        ("triangles", "triangles", ","), ("update_ms", "update ms", ".1f"), ("draw_ms", "draw ms", ".1f"),
                        ("draw_fps", "draw fps", ".1f"), ("fps", "frame fps", ".1f")]))
     name = "render" + ("-quick" if args.quick else "")
-    env = dict(environment("cpu"), gl_renderer=gl, cpu_count=os.cpu_count(), load_average_after=os.getloadavg())
+    # the device the Runtime's kernels actually ran on (the bake used the same one unless --store was given)
+    env = dict(environment(rt.device), gl_renderer=gl, cpu_count=os.cpu_count(), load_average_after=os.getloadavg())
     print("wrote", write(name, {"benchmark": "render", "quick": args.quick, "environment": env,
                                 "vertices": nv, "frames": frames, "rows": rows}, args.json))
     import matplotlib

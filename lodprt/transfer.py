@@ -26,7 +26,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-import shutil
 import time
 from pathlib import Path
 
@@ -35,7 +34,7 @@ import numpy as np
 from lodprt import sh
 from lodprt.devices import resolve_device, warp
 from lodprt.errors import LodprtError, StoreError
-from lodprt.store import check_destination, store_format
+from lodprt.store import StoreWriter, prepare_destination, store_format
 
 log = logging.getLogger(__name__)
 
@@ -415,7 +414,7 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
 
     device = resolve_device(device)
     if out is not None:
-        _check_destination(Path(out), overwrite=overwrite)
+        prepare_destination(Path(out), overwrite=overwrite, format=TRANSFER_FORMAT, what="lodprt transfer store")
     t_load = load_kernels(device)
     t0 = time.perf_counter()
     geom = Geometry.from_scene(scene, device=device)
@@ -440,21 +439,11 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device, cut_nodes, tree)
     if out is None:
         return result
-    import zarr
-
     path = Path(out)
-    partial = path.with_name(f"{path.name}.partial-{os.getpid()}")
-    if partial.exists():
-        shutil.rmtree(partial)
+    # the same partial-folder writer as the point-light bake: a killed bake never touches ``path`` (store.py)
+    writer = StoreWriter(path, overwrite=overwrite, format=TRANSFER_FORMAT, what="lodprt transfer store")
     try:
-        root = zarr.open_group(str(partial), mode="w-", zarr_format=3)
-
-        def arr(name, data):
-            data = np.ascontiguousarray(data)
-            a = root.create_array(name, shape=data.shape, dtype=data.dtype, chunks="auto")
-            if data.size:
-                a[...] = data
-
+        arr = writer.array
         arr("scene/positions", scene.positions.astype(np.float32))
         arr("scene/normals", scene.normals.astype(np.float32))
         arr("scene/faces", scene.faces.astype(np.int32))
@@ -471,15 +460,15 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
             arr("transfer/diffuse", diffuse.transfer[kept])
             for name, a in tree.to_arrays().items():
                 arr(f"hierarchy/{name}", a)
-            root.require_group("hierarchy").attrs.update(levels=tree.levels, seconds=hierarchy_seconds)
+            writer.attrs("hierarchy", levels=tree.levels, seconds=hierarchy_seconds)
         arr("transfer/glossy_vertex_ids", gids)
         if gmat is not None:
             arr("transfer/glossy", gmat)
         if environment is not None:
             arr("environment/coefficients", environment.project(order))
-            root.require_group("environment").attrs.update({"source": environment.source, "kind": environment.kind,
-                                                             "resolution": environment.resolution})
-        root.attrs.update(
+            writer.attrs("environment", source=environment.source, kind=environment.kind,
+                         resolution=environment.resolution)
+        writer.attrs(
             format=TRANSFER_FORMAT,
             format_version=TRANSFER_FORMAT_VERSION,
             lodprt_version=__version__,
@@ -503,16 +492,9 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
             load_seconds=float(t_load),
             device=device,
         )
-        if path.exists():
-            _check_destination(path, overwrite=overwrite)
-            backup = path.with_name(f"{path.name}.replaced-{os.getpid()}")
-            path.rename(backup)
-            partial.rename(path)
-            shutil.rmtree(backup)
-        else:
-            partial.rename(path)
+        writer.commit()
     except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
+        writer.abort()
         raise
     result.path = path
     return result
@@ -520,10 +502,6 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
 
 def is_transfer_store(path) -> bool:
     return store_format(path) == TRANSFER_FORMAT
-
-
-def _check_destination(path: Path, *, overwrite: bool) -> None:
-    check_destination(path, overwrite=overwrite, format=TRANSFER_FORMAT, what="lodprt transfer store")
 
 
 class TransferStore:
