@@ -7,7 +7,7 @@ compute the same quantities and are the tests' reference.
 
 import warp as wp
 
-from lodprt.kernels.sh import sh_basis_fast
+from lodprt.kernels.sh import bands_of, sh_basis_fast
 
 wp.set_module_options({"enable_backward": False})
 
@@ -39,9 +39,8 @@ def view_errors(
     weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample (T-12, intensities)
     box_centre: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box centre / white per node
     box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
-    order: int,  # In: SH bands
     alpha: float,  # In: weight of e_geo (T-14)
-    basis: wp.array2d(dtype=wp.float32),  # Scratch: (K, ncoef)
+    basis: wp.array2d(dtype=wp.float32),  # Scratch: (K, >= ncoef); ncoef = 1 (diffuse-only store) or order^2
     culled: wp.array(dtype=wp.uint8),  # Out: (K,) 1 when back-facing (T-13) or outside the frustum
     err: wp.array(dtype=wp.float32),  # Out: (K,) alpha e_geo + (1 - alpha) e_lumi (T-14)
     e_geo: wp.array(dtype=wp.float32),  # Out: (K,)
@@ -84,8 +83,9 @@ def view_errors(
         dy = (ca[1] / ca[3] - cb[1] / cb[3]) * half_h
         g = wp.min(wp.sqrt(dx * dx + dy * dy) / diag, 1.0)
     # e_lumi: the display spread of the interval that holds the leaves' radiance toward the eye
-    sh_basis_fast(vh, order, basis, k)
-    ncoef = order * order
+    # the SH width comes from the boxes themselves: 1 (y_0 of a diffuse-only store) or order^2
+    ncoef = wp.min(box_centre.shape[3], basis.shape[1])
+    sh_basis_fast(vh, bands_of(ncoef), basis, k)
     row = node - first_internal
     channels = box_centre.shape[2]
     hr = float(0.0)
@@ -129,8 +129,7 @@ def relight(
     used: wp.array(dtype=wp.int32),  # In: (U,) light samples with a non-zero weight
     weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample
     coeffs: wp.array4d(dtype=wp.float32),  # In: (V, S, C, ncoef) completed coefficients of every sample
-    order: int,  # In: SH bands
-    basis: wp.array2d(dtype=wp.float32),  # Scratch: (A, ncoef)
+    basis: wp.array2d(dtype=wp.float32),  # Scratch: (A, >= ncoef); ncoef = 1 (diffuse-only store) or order^2
     out_coeffs: wp.array3d(dtype=wp.float32),  # Out: (A, 3, ncoef) interpolated RGB coefficients
     radiance: wp.array2d(dtype=wp.float32),  # Out: (A, 3) radiance toward the eye (T-7)
 ):
@@ -139,8 +138,9 @@ def relight(
     dv = eye - positions[v]
     if wp.length(dv) <= 0.0:
         dv = normals[v]
-    sh_basis_fast(dv, order, basis, k)
-    ncoef = order * order
+    # the SH width comes from the arrays: 1 (y_0 of a diffuse-only store) or order^2
+    ncoef = wp.min(wp.min(coeffs.shape[3], out_coeffs.shape[2]), basis.shape[1])
+    sh_basis_fast(dv, bands_of(ncoef), basis, k)
     channels = coeffs.shape[2]
     for c in range(3):
         for i in range(ncoef):

@@ -35,6 +35,13 @@ def unit_direction(d: wp.vec3):
 
 
 @wp.func
+def bands_of(ncoef: int):
+    """The SH order (bands) whose basis has ``ncoef`` values: sqrt(ncoef) (1 for a diffuse-only store's y_0).
+    Kernels size their SH loops from the coefficient array they read, never from a setting passed beside it."""
+    return int(wp.sqrt(float(ncoef)) + 0.5)
+
+
+@wp.func
 def sh_basis(
     d: wp.vec3,  # In: direction, any length (normalised here; a zero vector reads as +z)
     order: int,  # In: bands; order^2 values are written

@@ -13,7 +13,7 @@ Coefficients are for a light of unit intensity; the light's RGB intensity is app
 
 import warp as wp
 
-from lodprt.kernels.sh import sh_basis
+from lodprt.kernels.sh import bands_of, sh_basis
 
 wp.set_module_options({"enable_backward": False})
 
@@ -48,7 +48,6 @@ def phong_sh(
     light: wp.vec3,  # In: light position
     falloff: int,  # In: 1 inverse-square, 0 none
     radius: float,  # In: light radius (near-field clamp of the falloff)
-    order: int,  # In: SH order (bands); ncoef = order^2, or 1 for diffuse-only scenes
     basis: wp.array2d(dtype=wp.float32),  # Scratch: (K, order^2)
     coeffs: wp.array3d(dtype=wp.float32),  # Out: (K, C, ncoef)
 ):
@@ -73,8 +72,10 @@ def phong_sh(
         return
     # specular: zonal lobe about R = 2 (N.L) N - L rotated to R (P-6)
     r = 2.0 * wp.dot(n, l) * n - l
-    sh_basis(r, order, basis, k)
-    for lband in range(order):
+    # bands from the arrays (never past the output, the scratch or the zonal table)
+    nb = wp.min(wp.min(bands_of(ncoef), bands_of(basis.shape[1])), zonal.shape[1])
+    sh_basis(r, nb, basis, k)
+    for lband in range(nb):
         g = spec * zonal[m, lband]
         for i in range(lband * lband, (lband + 1) * (lband + 1)):
             val = g * basis[k, i]

@@ -156,7 +156,6 @@ class _Baker:
                 wp.vec3(*map(float, light)),
                 self.falloff,
                 self.radius,
-                self.sh_order,
                 basis,
             ],
             outputs=[coeffs],

@@ -39,16 +39,28 @@ void main() { f_col = vec4(v_col, 1.0); }
 """
 
 
+def view_up(forward, up) -> np.ndarray:
+    """``up`` unless it is (nearly) parallel to the unit viewing direction ``forward``: then the world axis least
+    aligned with ``forward`` (looking straight down with up = +y gives -z up on screen), as viewers do; logged."""
+    up = np.asarray(up, np.float64)
+    n = np.linalg.norm(up)
+    if n > 0 and np.linalg.norm(np.cross(forward, up / n)) > 1e-6:
+        return up
+    axes = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    pick = axes[int(np.argmin(np.abs(axes @ forward)))]
+    log.info("camera: up %s is parallel to the viewing direction %s; using up %s", up.tolist(),
+             np.round(forward, 6).tolist(), pick.tolist())
+    return pick
+
+
 def look_at(eye, target, up) -> np.ndarray:
-    """4x4 view matrix (right-handed, camera looks down -z)."""
+    """4x4 view matrix (right-handed, camera looks down -z); an ``up`` along the view is replaced (``view_up``)."""
     eye, target, up = (np.asarray(x, np.float64) for x in (eye, target, up))
     f = target - eye
-    if np.linalg.norm(f) == 0:
+    if not np.linalg.norm(f) > 0:
         raise LodprtError("camera: eye and target coincide")
     f /= np.linalg.norm(f)
-    s = np.cross(f, up)
-    if np.linalg.norm(s) < 1e-12:
-        raise LodprtError("camera: the up vector is parallel to the viewing direction")
+    s = np.cross(f, view_up(f, up))
     s /= np.linalg.norm(s)
     u = np.cross(s, f)
     m = np.eye(4)
@@ -83,7 +95,7 @@ def draw_mesh(prog, vertices: np.ndarray, layout: tuple, triangles, mvp: np.ndar
     import moderngl
 
     ctx = prog.ctx
-    width, height = size
+    width, height = check_size(size, ctx)
     prog["mvp"].write(np.asarray(mvp).T.astype(np.float32).tobytes())  # column-major
     vbo = ctx.buffer(np.ascontiguousarray(vertices, np.float32).tobytes())
     ibo = ctx.buffer(np.asarray(triangles, np.int32).tobytes())
@@ -97,11 +109,24 @@ def draw_mesh(prog, vertices: np.ndarray, layout: tuple, triangles, mvp: np.ndar
     return img[::-1].copy()  # OpenGL's first row is the bottom
 
 
-def check_size(size) -> tuple[int, int]:
-    """(width, height) as ints, LodprtError unless both are >= 1."""
-    width, height = (int(x) for x in size)
+def check_size(size, ctx=None) -> tuple[int, int]:
+    """(width, height) as ints, LodprtError unless both are >= 1 and, with a moderngl ``ctx``, within its largest
+    renderbuffer and viewport (GL_MAX_RENDERBUFFER_SIZE, GL_MAX_VIEWPORT_DIMS)."""
+    try:
+        width, height = (int(x) for x in size)
+    except (TypeError, ValueError) as exc:
+        raise LodprtError(f"size {size!r}: expected two integers (width height)") from exc
     if width < 1 or height < 1:
         raise LodprtError(f"size {size}: width and height must be >= 1")
+    if ctx is not None:
+        info = ctx.info
+        dims = info.get("GL_MAX_VIEWPORT_DIMS") or (1 << 30, 1 << 30)
+        side = int(info.get("GL_MAX_RENDERBUFFER_SIZE") or 1 << 30)
+        max_w, max_h = min(side, int(dims[0])), min(side, int(dims[1]))
+        if width > max_w or height > max_h:
+            raise LodprtError(f"size {width} x {height}: this OpenGL context ({info.get('GL_RENDERER', 'unknown')}) "
+                              f"draws at most {max_w} x {max_h} pixels (GL_MAX_RENDERBUFFER_SIZE, "
+                              f"GL_MAX_VIEWPORT_DIMS)")
     return width, height
 
 
@@ -438,8 +463,13 @@ class Renderer:
         if key not in self._fbos:
             for old in [k for k in self._fbos if k[1] == linear]:  # one cached target per kind
                 self._release_fbo(self._fbos.pop(old))
+            size = check_size(size, self.ctx)
             colour = self.ctx.renderbuffer(size, 4, dtype="f4" if linear else "f1")
-            self._fbos[key] = self.ctx.framebuffer([colour], self.ctx.depth_renderbuffer(size))
+            try:
+                self._fbos[key] = self.ctx.framebuffer([colour], self.ctx.depth_renderbuffer(size))
+            except Exception as exc:  # moderngl.Error: out of memory for a size within the limits
+                colour.release()
+                raise LodprtError(f"size {size[0]} x {size[1]}: cannot make an offscreen framebuffer ({exc})") from exc
         return self._fbos[key]
 
     @staticmethod

@@ -412,7 +412,7 @@ class Runtime:
                 wp.array(self._planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self._vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), used, weights,
-                d["box_centre"], d["box_half"], self.order, self.alpha, wp.empty((K, self.order * self.order), dtype=wp.float32, device=dev),
+                d["box_centre"], d["box_half"], self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
         culled, err, geo, lumi = (o.numpy() for o in outs)
         return culled.astype(bool), err.astype(np.float64), geo.astype(np.float64), lumi.astype(np.float64)
@@ -450,7 +450,7 @@ class Runtime:
         e_geo = np.where(behind, 1.0, np.linalg.norm(sa - sb, axis=1) / math.hypot(cam.width, cam.height))
         e_geo = np.clip(e_geo, 0.0, 1.0)
         # e_lumi: display-space spread bounded by the interval of the leaves' radiance toward the eye
-        y = sh.basis(vh, self.order)
+        y = sh.basis(vh, self.order)[:, :self.box_centre.shape[3]]  # 1 (diffuse-only store) or order^2 wide
         hi = np.zeros((len(nodes), 3))
         lo = np.zeros((len(nodes), 3))
         internal = nodes - self.h.num_vertices
@@ -588,7 +588,7 @@ class Runtime:
             used, weights = self._frame_inputs()
             self._launch(kr.relight, A, [
                 wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), d["positions"], d["normals"],
-                wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"], self.order,
+                wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"],
                 wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)], [coef, rad])
         return coef.numpy(), rad.numpy()
 
@@ -652,7 +652,8 @@ def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", 
         raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
     col = col.astype(np.float64)
     W = interp.rgb_weights(pos, col)
-    out = np.zeros((store.num_vertices, 3, store.sh_order ** 2))
+    # as wide as the stored coefficients: 1 (y_0 of a diffuse-only store) or order^2
+    out = np.zeros((store.num_vertices, 3, store.coefficients_per_vertex))
     for j in np.flatnonzero(np.abs(W).sum(1) > 0):
         c = store.coefficients(int(j))  # (V, C, ncoef), completed; C = 1 (grey) broadcasts over R, G, B
         out += c * W[j][None, :, None]

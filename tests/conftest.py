@@ -1,5 +1,6 @@
-"""Shared fixtures: every available Warp device, and the shared test meshes."""
+"""Shared fixtures: every available Warp device, the shared test meshes, an OpenGL context check."""
 
+import functools
 from pathlib import Path
 
 import pytest
@@ -50,3 +51,48 @@ def bunny_bake(bunny_floor, bunny_hierarchy, tmp_path_factory):
     path = tmp_path_factory.mktemp("bunny-bake") / "bunny.zarr"
     bake(bunny_floor, path, sh_order=4, device="cpu", threshold_deg=30.0, tree=bunny_hierarchy)
     return path
+
+
+@functools.cache
+def gl_unavailable() -> str | None:
+    """Why no offscreen OpenGL 3.3 context can be made here (None when one can)."""
+    from lodprt.errors import LodprtError
+    from lodprt.render import create_context
+
+    try:
+        create_context().release()
+    except LodprtError as exc:
+        return str(exc)
+    return None
+
+
+@pytest.fixture
+def gl():
+    """Skips (saying so) only when no OpenGL context can be made; any other error in a GL test fails it."""
+    why = gl_unavailable()
+    if why:
+        pytest.skip(f"no offscreen OpenGL context on this machine: {why}")
+
+
+def pytest_addoption(parser):
+    parser.addoption("--warp-debug", action="store_true", default=False,
+                     help="compile Warp kernels in debug mode (bounds-checked array access; an index past an "
+                          "array's end stops the process, and the last kernel launched is printed on stderr)")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "warp_debug: the focused subset that runs every kernel on every store kind; "
+                            "`python -m pytest --warp-debug -m warp_debug` runs it bounds-checked")
+    if config.getoption("--warp-debug"):
+        import sys
+
+        import warp as wp
+
+        wp.config.mode = "debug"  # before any module is loaded: debug builds hash (and cache) apart
+        launch = wp.launch
+
+        def named_launch(kernel, *args, **kw):  # a failed bounds check aborts: say which kernel ran last
+            print(f"[warp-debug] launch {getattr(kernel, 'key', kernel)}", file=sys.stderr, flush=True)
+            return launch(kernel, *args, **kw)
+
+        wp.launch = named_launch

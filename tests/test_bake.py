@@ -35,6 +35,7 @@ def test_phong_sh_matches_float64_reference(device, bunny_path, order):
     np.testing.assert_allclose(coeffs[:, 0], ref, atol=2e-5 * scale, rtol=1e-4)
 
 
+@pytest.mark.warp_debug
 def test_closed_form_equals_quadrature_kernel(device, bunny_path):
     """The closed-form projection equals the quadrature projection of the same Phong radiance (kernel vs kernel)."""
     wp = warp()
@@ -127,6 +128,7 @@ def test_light_on_vertex_and_surface_stays_finite(device):
         assert c0 <= np.sqrt(4 * np.pi) * 0.88 / radius**2 * 1.0001 + 0.19 * 4 / radius**2
 
 
+@pytest.mark.warp_debug
 def test_single_triangle_duplicated_vertices_nonmanifold(device):
     """A single triangle, duplicated vertices (equal coefficients) and a non-manifold edge bake without NaN."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [0, 0, 0], [0, 1, 0.5], [0, -1, 0.5]])
@@ -140,6 +142,7 @@ def test_single_triangle_duplicated_vertices_nonmanifold(device):
     assert np.isfinite(c1).all() and (c1[:, 0, 0] > 0).all()
 
 
+@pytest.mark.warp_debug
 def test_layout_leaves_out_what_the_scene_does_not_need(tmp_path, device):
     """Diffuse-only scenes store 1 coefficient; grey scenes 1 channel; coloured scenes 3 channels in kd's ratio."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])

@@ -43,6 +43,7 @@ def test_cuts_are_valid_fronts(device, bunny_floor, bunny_hierarchy, threshold):
         assert lit_under_dark < 0.01
 
 
+@pytest.mark.warp_debug
 def test_threshold_monotone_and_eps0_keeps_lit(device, bunny_floor, bunny_hierarchy):
     """epsilon = 0 keeps every lit, front-facing vertex; larger thresholds keep fewer vertices."""
     light = bunny_floor.lights.positions[4]
@@ -56,6 +57,7 @@ def test_threshold_monotone_and_eps0_keeps_lit(device, bunny_floor, bunny_hierar
     assert counts[0] > counts[1] >= counts[2]
 
 
+@pytest.mark.warp_debug
 def test_uniform_incidence_collapses_to_the_base(device):
     """A plane under a very distant light (nothing shadowed, all angles equal within 5 deg) keeps only the base."""
     pos, faces = floor_mesh(np.array([[0, 0, 0], [1, 0, 1.0]]), 30, 0.0, 1.0)

@@ -95,6 +95,7 @@ def test_basis_shapes_and_normalisation():
 # -- float32 Warp kernel ----------------------------------------------------------------------------------------
 
 
+@pytest.mark.warp_debug
 @pytest.mark.parametrize("order", sorted({1, 2, 4, 8, 16, ksh.MAX_KERNEL_ORDER}))
 def test_float32_kernel_matches_float64(device, order):
     """The Warp float32 basis equals the float64 reference to 1e-5 absolute; a zero vector gives +z, never NaN."""
@@ -107,6 +108,7 @@ def test_float32_kernel_matches_float64(device, order):
     np.testing.assert_allclose(y[-4], sh.basis([0, 0, 1], order), rtol=0, atol=1e-5)
 
 
+@pytest.mark.warp_debug
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 8])
 def test_closed_form_kernel_basis_matches_float64(device, order):
     """sh_basis_fast (closed-form polynomials for l <= 3, the recurrence above) equals the float64 reference."""

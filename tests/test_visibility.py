@@ -42,6 +42,7 @@ def test_visibility_matches_embree_on_bunny_and_floor(device, bunny_path, scale)
         assert 0.02 < shadowed < 0.9  # the bunny does shadow the floor and itself
 
 
+@pytest.mark.warp_debug
 def test_light_on_a_vertex_and_on_the_surface(device):
     """A light exactly at a vertex or on a face counts as lit there (finite, no ray through itself)."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1.0]])
@@ -64,6 +65,7 @@ def test_back_facing_vertices_cast_no_ray(device):
     assert (vis == LIT).all()
 
 
+@pytest.mark.warp_debug
 def test_occluder_between_light_and_vertex(device):
     """A small triangle hovering between a floor vertex and the light shadows exactly that vertex."""
     floor = np.array([[-1, 0, -1], [-1, 0, 1], [1, 0, -1], [1, 0, 1.0], [0, 0, 0]])
