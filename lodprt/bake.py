@@ -18,8 +18,10 @@ import dataclasses
 import logging
 import math
 import os
+import sys
 import threading
 import time
+import types
 from typing import Callable
 
 import numpy as np
@@ -54,7 +56,8 @@ class BakeResult:
 def ray_offset(scene: Scene) -> float:
     """Shadow-ray offset in scene units: scales with the scene's size and with float32 resolution of its coordinates."""
     coord = float(np.abs(scene.bounds).max())
-    return max(RAY_OFFSET_FRACTION * scene.diagonal, 64.0 * np.finfo(np.float32).eps * coord)
+    # a Python float: numpy's float32 eps would make the product float32, which the store's JSON attributes refuse
+    return max(RAY_OFFSET_FRACTION * scene.diagonal, 64.0 * float(np.finfo(np.float32).eps) * coord)
 
 
 def layout(scene: Scene, sh_order: int) -> tuple[int, int]:
@@ -291,23 +294,8 @@ def bake(
             futures = [pool.submit(run, k) for k in range(len(lights))]
             for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
                 k, kept, extra, coeffs, visible, seconds = fut.result()
-                counts = np.bincount(visible, minlength=4)
-                info = {
-                    "vertices_kept": int(len(kept)),
-                    "bytes": int(kept.nbytes + coeffs.nbytes + sum(a.nbytes for a in extra.values())),
-                    "seconds": float(seconds),
-                    "shadowed": int(counts[0]),
-                    "lit": int(counts[1]),
-                    "back_facing": int(counts[2]),
-                }
-                samples[k] = info
-                if writer is not None:
-                    g = sample_group(k)
-                    writer.array(f"{g}/vertex_ids", kept, chunk_rows=1 << 18)
-                    writer.array(f"{g}/coefficients", coeffs, chunk_rows=1 << 16)
-                    for name, arr in extra.items():
-                        writer.array(f"{g}/{name}", arr, chunk_rows=1 << 18)
-                    writer.attrs(g, **info)
+                _check_finite(scene, k, lights[k], coeffs)
+                samples[k] = _record(writer, k, kept, extra, coeffs, visible, seconds)
                 if progress is not None:
                     progress(done, len(lights))
         # bake_seconds counts the light samples and the store; the hierarchy reports its own time
@@ -348,6 +336,38 @@ def bake(
         raise
 
 
+def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visible, seconds: float) -> dict:
+    """Write light sample ``k`` (when there is a store) and return its statistics."""
+    counts = np.bincount(visible, minlength=4)
+    info = {
+        "vertices_kept": int(len(kept)),
+        "bytes": int(kept.nbytes + coeffs.nbytes + sum(a.nbytes for a in extra.values())),
+        "seconds": float(seconds),
+        "shadowed": int(counts[0]),
+        "lit": int(counts[1]),
+        "back_facing": int(counts[2]),
+    }
+    if writer is not None:
+        g = sample_group(k)
+        writer.array(f"{g}/vertex_ids", kept, chunk_rows=1 << 18)
+        writer.array(f"{g}/coefficients", coeffs, chunk_rows=1 << 16)
+        for name, arr in extra.items():
+            writer.array(f"{g}/{name}", arr, chunk_rows=1 << 18)
+        writer.attrs(g, **info)
+    return info
+
+
+def _check_finite(scene: Scene, k: int, light: np.ndarray, coeffs: np.ndarray) -> None:
+    """Refuse to store NaN or infinite coefficients. Scene limits (lodprt.scene) keep float32 finite; this catches
+    what they miss instead of writing a store that renders black or NaN."""
+    bad = ~np.isfinite(coeffs).all(axis=tuple(range(1, coeffs.ndim)))  # per vertex; a cut may keep none
+    if bad.any():
+        raise LodprtError(
+            f"{scene.source}: light sample {k} at {np.round(light, 6).tolist()}: {int(bad.sum())} vertices got NaN or "
+            "infinite coefficients (float32 overflow); check the scene's scale, light radius, materials and intensity"
+        )
+
+
 def _version() -> str:
     from lodprt import __version__
 
@@ -375,3 +395,15 @@ def _write_scene(writer: StoreWriter, scene: Scene, baker: _Baker) -> None:
         falloff=lights.falloff,
         radius=lights.radius,
     )
+
+
+class _CallableModule(types.ModuleType):
+    """The first ``import lodprt.bake`` binds the package attribute ``lodprt.bake`` to this module, hiding the public
+    function of that name (lodprt/__init__.py): calling the module calls ``bake``, so ``lodprt.bake(...)`` works
+    whichever was imported first."""
+
+    def __call__(self, *args, **kwargs):
+        return bake(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

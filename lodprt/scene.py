@@ -6,9 +6,9 @@ A scene is given as one of
   * a TOML scene file (``*.toml``, format in ``docs/SCENE.md``);
   * a bare mesh path (OBJ, PLY, STL, OFF, GLB/GLTF): that mesh with the thesis material, no floor, default lights.
 
-Meshes are read with trimesh keeping the file's vertex order (``process=False``, ``maintain_order=True``): store
-vertex ``i`` of an object is vertex ``i`` of its file. Objects are concatenated in file order, the floor last.
-Coordinates are y-up.
+Meshes are read by ``lodprt.meshio`` keeping the file's vertex order: store vertex ``i`` of an object is vertex
+``i`` of its file. Objects are concatenated in file order, the floor last. Coordinates are y-up; an object's
+``up`` key turns a z-up (or x-up) file upright.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import SceneError
+from lodprt.meshio import COORDINATE_LIMIT, UP_AXES, load_mesh, require_file  # noqa: F401  (load_mesh is public)
 
 log = logging.getLogger(__name__)
 
@@ -33,10 +34,29 @@ THESIS_SHININESS = 2.0
 
 FALLOFFS = ("inverse-square", "none")
 
-_OBJECT_KEYS = {"mesh", "name", "kd", "ks", "shininess", "scale", "translate"}
+_OBJECT_KEYS = {"mesh", "name", "kd", "ks", "shininess", "scale", "translate", "up", "rotate"}
 _FLOOR_KEYS = {"resolution", "margin", "kd", "ks", "shininess"}
 _LIGHT_KEYS = {"grid", "box", "intensity", "falloff", "radius"}
 _TOP_KEYS = {"object", "floor", "lights"}
+
+#: Most light samples a scene may ask for (product of ``lights.grid``): every sample is a group of the store
+#: (``samples/00000`` ...), baked and written in full, and five digits keep the groups in sample order.
+MAX_LIGHT_SAMPLES = 100_000
+
+#: Largest ``floor.resolution``: 4096^2 = 16.8 M floor vertices, about 2 GB of positions, faces and normals on the
+#: host before the bake starts.
+MAX_FLOOR_RESOLUTION = 4096
+
+# The kernels compute in float32 (largest finite value about 3.4e38): irradiance 1/max(d, radius)^2 is at most
+# 1/MIN_RADIUS^2 = 1e24, and times kd or ks (at most MATERIAL_LIMIT) and the SH basis stays far below it.
+#: Smallest light radius; the default radius is 1e-3 scene diagonals, hence MIN_SCENE_DIAGONAL.
+MIN_RADIUS = 1e-12
+#: Smallest bounding diagonal of the referenced vertices (a 1e-20 scene bakes to NaN: squares underflow float32).
+MIN_SCENE_DIAGONAL = 1e-9
+#: Largest kd (each channel) and ks.
+MATERIAL_LIMIT = 1e6
+#: Largest light intensity (each channel); radiance = coefficients x intensity is returned as float32.
+INTENSITY_LIMIT = 1e12
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,6 +163,22 @@ def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return n / length[:, None]
 
 
+def face_has_area(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: the face's area is not zero up to rounding.
+
+    Relative to the face's longest edge, so the test does not depend on the scene's size or offset: a face counts as
+    zero-area when |e1 x e2| <= 1e-12 |e_max|^2 (collinear float64 points leave a cross product of about 1e-16
+    |e|^2 from rounding), or when it is not finite.
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    a, b, c = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    with np.errstate(over="ignore", invalid="ignore"):
+        cross = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        longest = np.maximum.reduce([np.einsum("ij,ij->i", e, e) for e in (b - a, c - a, c - b)])
+        return np.isfinite(cross) & (cross > 1e-12 * longest)
+
+
 def floor_mesh(bounds: np.ndarray, resolution: int, margin: float, extent: float) -> tuple[np.ndarray, np.ndarray]:
     """A y-up grid of ``resolution`` x ``resolution`` vertices at the objects' lowest y.
 
@@ -166,39 +202,6 @@ def floor_mesh(bounds: np.ndarray, resolution: int, margin: float, extent: float
 
 # ---------------------------------------------------------------------------------------------------------------
 # reading
-
-
-def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """Read one triangle mesh keeping the file's vertex order; returns (positions (V,3) float64, faces (F,3) int32).
-
-    Raises SceneError naming the file for a missing or unreadable file, an empty mesh, non-finite coordinates or
-    face indices out of range.
-    """
-    import trimesh
-
-    path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"{path}: mesh file not found")
-    try:
-        mesh = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
-    except Exception as exc:  # trimesh raises many types for bad files
-        raise SceneError(f"{path}: cannot read mesh: {exc}") from exc
-    verts = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
-    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
-    if len(verts) == 0:
-        raise SceneError(f"{path}: field 'vertices': the mesh has no vertices")
-    if len(faces) == 0:
-        raise SceneError(f"{path}: field 'faces': the mesh has no faces (point clouds cannot be baked)")
-    finite = np.isfinite(verts).all(axis=1)
-    if not finite.all():
-        bad = np.flatnonzero(~finite)
-        raise SceneError(
-            f"{path}: field 'vertices': {len(bad)} vertices have NaN or infinite coordinates (first: vertex {bad[0]})"
-        )
-    if faces.min() < 0 or faces.max() >= len(verts):
-        raise SceneError(f"{path}: field 'faces': face indices out of range 0..{len(verts) - 1}")
-    verts = verts * float(scale) + np.asarray(translate, dtype=np.float64)
-    return verts, faces.astype(np.int32)
 
 
 def _demo_mesh_path() -> Path | None:
@@ -228,22 +231,41 @@ def _procedural_mesh() -> tuple[np.ndarray, np.ndarray]:
 # validation helpers: every message names the file and the field
 
 
-def _check_keys(where: str, table: dict, known: set[str]) -> None:
+def _show(value) -> str:
+    """repr for messages: at most 80 characters, and safe for integers too long for str()."""
+    try:
+        text = repr(value)
+    except ValueError:  # Python refuses to print integers of more than 4300 digits
+        text = f"<an integer of {value.bit_length()} bits>"
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _check_keys(where: str, table, known: set[str]) -> None:
+    if not isinstance(table, dict):
+        raise SceneError(f"{where}: expected a table (keys {', '.join(sorted(known))}), got {_show(table)}")
     unknown = sorted(set(table) - known)
     if unknown:
-        raise SceneError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))} (known: {', '.join(sorted(known))})")
+        known_list = ", ".join(sorted(known))
+        raise SceneError(f"{where}: unknown key(s) {', '.join(map(_show, unknown))} (known: {known_list})")
 
 
-def _number(where: str, value, *, minimum: float | None = None, positive: bool = False) -> float:
+def _number(
+    where: str, value, *, minimum: float | None = None, positive: bool = False, maximum: float | None = None
+) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{where}: expected a number, got {value!r}")
-    v = float(value)
+        raise SceneError(f"{where}: expected a number, got {_show(value)}")
+    try:
+        v = float(value)
+    except OverflowError:  # TOML integers have no size limit in tomllib; floats stop near 1.8e308
+        v = math.inf
     if not math.isfinite(v):
-        raise SceneError(f"{where}: must be finite, got {value!r}")
+        raise SceneError(f"{where}: must be finite, got {_show(value)}")
     if positive and v <= 0:
-        raise SceneError(f"{where}: must be > 0, got {value!r}")
+        raise SceneError(f"{where}: must be > 0, got {_show(value)}")
     if minimum is not None and v < minimum:
-        raise SceneError(f"{where}: must be >= {minimum}, got {value!r}")
+        raise SceneError(f"{where}: must be >= {minimum}, got {_show(value)}")
+    if maximum is not None and v > maximum:
+        raise SceneError(f"{where}: must be <= {maximum:g}, got {_show(value)}")
     return v
 
 
@@ -251,13 +273,14 @@ def _vector(where: str, value, n: int, **kw) -> tuple[float, ...]:
     if isinstance(value, (int, float)) and not isinstance(value, bool) and n == 3:
         value = [value] * 3  # a grey colour given as one number
     if not isinstance(value, (list, tuple)) or len(value) != n:
-        raise SceneError(f"{where}: expected a list of {n} numbers, got {value!r}")
+        raise SceneError(f"{where}: expected a list of {n} numbers, got {_show(value)}")
     return tuple(_number(f"{where}[{i}]", v, **kw) for i, v in enumerate(value))
 
 
 def _material(where: str, table: dict, default: Material) -> Material:
-    kd = _vector(f"{where}.kd", table["kd"], 3, minimum=0.0) if "kd" in table else default.kd
-    ks = _number(f"{where}.ks", table["ks"], minimum=0.0) if "ks" in table else default.ks
+    lim = {"minimum": 0.0, "maximum": MATERIAL_LIMIT}
+    kd = _vector(f"{where}.kd", table["kd"], 3, **lim) if "kd" in table else default.kd
+    ks = _number(f"{where}.ks", table["ks"], **lim) if "ks" in table else default.ks
     n = _number(f"{where}.shininess", table["shininess"], minimum=0.0) if "shininess" in table else default.shininess
     return Material(kd=kd, ks=ks, shininess=n)
 
@@ -270,40 +293,73 @@ def default_light_box(bounds: np.ndarray) -> tuple[float, ...]:
     return (lo[0] - 0.5 * ext, hi[1] + 0.4 * ext, lo[2] - 0.5 * ext, hi[0] + 0.5 * ext, hi[1] + 0.75 * ext, hi[2] + 0.5 * ext)
 
 
-def _lights(where: str, table: dict, bounds: np.ndarray, diagonal: float) -> Lights:
+def _grid(where: str, table) -> tuple[int, int, int]:
+    """The light grid, refused when it asks for more than MAX_LIGHT_SAMPLES samples (before anything is allocated)."""
     _check_keys(where, table, _LIGHT_KEYS)
     grid = table.get("grid", [3, 1, 3])
     if not isinstance(grid, list) or len(grid) != 3 or not all(isinstance(g, int) and not isinstance(g, bool) for g in grid):
-        raise SceneError(f"{where}.grid: expected 3 integers, got {grid!r}")
+        raise SceneError(f"{where}.grid: expected 3 integers, got {_show(grid)}")
     if min(grid) < 1:
-        raise SceneError(f"{where}.grid: every axis needs at least 1 sample, got {grid!r}")
+        raise SceneError(f"{where}.grid: every axis needs at least 1 sample, got {_show(grid)}")
+    if math.prod(grid) > MAX_LIGHT_SAMPLES:
+        raise SceneError(
+            f"{where}.grid: {_show(grid)} asks for {_show(math.prod(grid))} light samples; at most "
+            f"{MAX_LIGHT_SAMPLES:,} are allowed"
+        )
+    return tuple(grid)
+
+
+def _lights(where: str, table: dict, bounds: np.ndarray, diagonal: float) -> Lights:
+    grid = _grid(where, table)
     box = _vector(f"{where}.box", table["box"], 6) if "box" in table else default_light_box(bounds)
+    if max(map(abs, box)) >= COORDINATE_LIMIT:
+        raise SceneError(f"{where}.box: coordinates must lie within +-{COORDINATE_LIMIT:g}, got {_show(box)}")
     for a, name in enumerate("xyz"):
         if not box[a + 3] > box[a]:
             raise SceneError(
                 f"{where}.box: the light box has zero or negative size along {name} "
                 f"({name}min={box[a]}, {name}max={box[a + 3]}); give xmin ymin zmin xmax ymax zmax with max > min"
             )
-    intensity = _vector(f"{where}.intensity", table.get("intensity", [1.0, 1.0, 1.0]), 3, minimum=0.0)
+    intensity = _vector(
+        f"{where}.intensity", table.get("intensity", [1.0, 1.0, 1.0]), 3, minimum=0.0, maximum=INTENSITY_LIMIT
+    )
     falloff = table.get("falloff", "inverse-square")
     if falloff not in FALLOFFS:
-        raise SceneError(f"{where}.falloff: expected one of {FALLOFFS}, got {falloff!r}")
+        raise SceneError(f"{where}.falloff: expected one of {FALLOFFS}, got {_show(falloff)}")
     radius = _number(f"{where}.radius", table["radius"], positive=True) if "radius" in table else 1e-3 * diagonal
-    return Lights(grid=tuple(grid), box=tuple(box), intensity=intensity, falloff=falloff, radius=radius)
+    if not MIN_RADIUS <= radius < COORDINATE_LIMIT:
+        raise SceneError(f"{where}.radius: must lie in [{MIN_RADIUS:g}, {COORDINATE_LIMIT:g}), got {_show(radius)}")
+    return Lights(grid=grid, box=tuple(box), intensity=intensity, falloff=falloff, radius=radius)
 
 
 # ---------------------------------------------------------------------------------------------------------------
 # assembly
 
 
-def _assemble(objects, floor, light_table, where_lights, source) -> Scene:
-    """objects: list of (name, positions, faces, Material); floor: None or (resolution, margin, Material)."""
+def _assemble(objects, floor, light_table, where_lights, source, *, wheres=None, origins=None) -> Scene:
+    """objects: list of (name, positions, faces, Material); floor: None or (resolution, margin, Material).
+
+    Messages about object ``k`` start with ``wheres[k]`` (default ``"{source}: object[k] (name ...)"``) and call
+    its mesh ``origins[k]`` (default "its mesh"). Raises SceneError when an object has no face of non-zero area:
+    it would bake "successfully" with nothing but fallback normals.
+    """
+    for k, (name, p, f, _) in enumerate(objects):
+        if not face_has_area(p, f).any():
+            where = wheres[k] if wheres else f"{source}: object[{k}] (name {_show(name)})"
+            origin = origins[k] if origins else "its mesh"
+            raise SceneError(f"{where}: every face of {origin} has zero area; nothing to bake")
     all_pos = np.concatenate([o[1] for o in objects])
     bounds = np.stack([all_pos.min(axis=0), all_pos.max(axis=0)])
     extent = max(float((o[1].max(axis=0) - o[1].min(axis=0)).max()) for o in objects)
     parts = list(objects)
     if floor is not None:
         resolution, margin, mat = floor
+        reach = float(np.abs(bounds).max()) + margin * extent
+        if not reach < COORDINATE_LIMIT:
+            raise SceneError(
+                f"{source}: floor.margin: a margin of {margin:g} object extents ({extent:g}) takes the floor beyond "
+                f"the coordinate limit +-{COORDINATE_LIMIT:g}"
+            )
         fp, ff = floor_mesh(bounds, resolution, margin, extent)
         parts.append(("floor", fp, ff, mat))
     materials: list[Material] = []
@@ -326,6 +382,16 @@ def _assemble(objects, floor, light_table, where_lights, source) -> Scene:
     referenced[faces.ravel()] = True
     full_bounds = np.stack([positions[referenced].min(axis=0), positions[referenced].max(axis=0)])
     diagonal = float(np.linalg.norm(full_bounds[1] - full_bounds[0]))
+    coord = float(np.abs(full_bounds).max())
+    if diagonal < 1e3 * float(np.finfo(np.float32).eps) * coord:
+        # float32 positions of the bake keep fewer than ~1000 steps across the scene: shapes collapse into a few points
+        log.warning("%s: the scene (diagonal %g) lies %g from the origin: float32 positions cannot resolve it; move it "
+                    "nearer the origin with 'translate'", source, diagonal, coord)
+    if not diagonal >= MIN_SCENE_DIAGONAL:
+        raise SceneError(
+            f"{source}: the scene's bounding diagonal is {diagonal:g}, below {MIN_SCENE_DIAGONAL:g}: too small for "
+            "the float32 kernels; enlarge it with an object's 'scale'"
+        )
     lights = _lights(where_lights, light_table, bounds, diagonal)
     return Scene(
         positions=positions,
@@ -356,46 +422,64 @@ def demo_scene(*, floor_resolution: int = 200) -> Scene:
     return _assemble([(name, pos, faces, THESIS_MATERIAL)], (floor_resolution, 1.0, THESIS_MATERIAL), {}, "demo.lights", source)
 
 
+def _object(path: Path, k: int, table) -> tuple[tuple, str]:
+    """Object ``k`` of scene file ``path``: ((name, positions, faces, Material), where to name it in messages)."""
+    where = f"{path}: object[{k}]"
+    _check_keys(where, table, _OBJECT_KEYS)
+    mesh = table.get("mesh")
+    if not isinstance(mesh, str) or not mesh.strip() or "\0" in mesh:
+        raise SceneError(f"{where}.mesh: required, a path relative to the scene file, got {_show(mesh)}")
+    mesh_path = Path(mesh) if os.path.isabs(mesh) else path.parent / mesh
+    name = table.get("name", Path(mesh).stem)
+    if not isinstance(name, str):
+        raise SceneError(f"{where}.name: expected a string, got {_show(name)}")
+    up = table.get("up", "y")
+    if not isinstance(up, str) or up not in UP_AXES:
+        raise SceneError(f"{where}.up: expected one of {', '.join(map(repr, UP_AXES))}, got {_show(up)}")
+    rotate = _vector(f"{where}.rotate", table["rotate"], 3) if "rotate" in table else (0.0, 0.0, 0.0)
+    scale = _number(f"{where}.scale", table["scale"], positive=True) if "scale" in table else 1.0
+    translate = _vector(f"{where}.translate", table["translate"], 3) if "translate" in table else (0.0, 0.0, 0.0)
+    material = _material(where, table, THESIS_MATERIAL)
+    try:
+        pos, faces = load_mesh(mesh_path, scale=scale, translate=translate, up=up, rotate=rotate)
+    except SceneError as exc:
+        raise SceneError(f"{where}.mesh: {exc}") from exc
+    return (name, pos, faces, material), f"{where} (name {_show(name)})"
+
+
+def _floor(path: Path, ft) -> tuple[int, float, Material]:
+    where = f"{path}: floor"
+    _check_keys(where, ft, _FLOOR_KEYS)
+    res = ft.get("resolution", 380)
+    if isinstance(res, bool) or not isinstance(res, int) or not 2 <= res <= MAX_FLOOR_RESOLUTION:
+        raise SceneError(f"{where}.resolution: expected an integer from 2 to {MAX_FLOOR_RESOLUTION}, got {_show(res)}")
+    margin = _number(f"{where}.margin", ft.get("margin", 1.0), minimum=0.0)
+    return res, margin, _material(where, ft, THESIS_MATERIAL)
+
+
 def scene_from_toml(path: str | os.PathLike) -> Scene:
     """Read a TOML scene file (docs/SCENE.md); mesh paths are relative to the file."""
     path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"{path}: scene file not found")
+    require_file(path, "scene")
     try:
         with open(path, "rb") as fh:
             doc = tomllib.load(fh)
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:  # TOML must be UTF-8
         raise SceneError(f"{path}: cannot parse TOML: {exc}") from exc
     _check_keys(f"{path}", doc, _TOP_KEYS)
+    lights = doc.get("lights", {})
+    _grid(f"{path}: lights", lights)  # a huge grid or floor fails now, not after the meshes are read
+    floor = _floor(path, doc["floor"]) if "floor" in doc else None
     tables = doc.get("object")
     if not isinstance(tables, list) or not tables:
         raise SceneError(f"{path}: field 'object': at least one [[object]] table with a 'mesh' is required")
-    objects = []
+    objects, wheres, origins = [], [], []
     for k, table in enumerate(tables):
-        where = f"{path}: object[{k}]"
-        _check_keys(where, table, _OBJECT_KEYS)
-        if "mesh" not in table or not isinstance(table["mesh"], str):
-            raise SceneError(f"{where}.mesh: required, a path relative to the scene file")
-        mesh_path = (path.parent / table["mesh"]).resolve() if not os.path.isabs(table["mesh"]) else Path(table["mesh"])
-        scale = _number(f"{where}.scale", table["scale"], positive=True) if "scale" in table else 1.0
-        translate = _vector(f"{where}.translate", table["translate"], 3) if "translate" in table else (0.0, 0.0, 0.0)
-        try:
-            pos, faces = load_mesh(mesh_path, scale=scale, translate=translate)
-        except SceneError as exc:
-            raise SceneError(f"{where}.mesh: {exc}") from exc
-        name = str(table.get("name", Path(table["mesh"]).stem))
-        objects.append((name, pos, faces, _material(where, table, THESIS_MATERIAL)))
-    floor = None
-    if "floor" in doc:
-        where = f"{path}: floor"
-        ft = doc["floor"]
-        _check_keys(where, ft, _FLOOR_KEYS)
-        res = ft.get("resolution", 380)
-        if isinstance(res, bool) or not isinstance(res, int) or res < 2:
-            raise SceneError(f"{where}.resolution: expected an integer >= 2, got {res!r}")
-        margin = _number(f"{where}.margin", ft.get("margin", 1.0), minimum=0.0)
-        floor = (res, margin, _material(where, ft, THESIS_MATERIAL))
-    return _assemble(objects, floor, doc.get("lights", {}), f"{path}: lights", str(path))
+        obj, where = _object(path, k, table)
+        objects.append(obj)
+        wheres.append(where)
+        origins.append(table["mesh"])
+    return _assemble(objects, floor, lights, f"{path}: lights", str(path), wheres=wheres, origins=origins)
 
 
 def load_scene(spec: str | os.PathLike) -> Scene:
@@ -406,4 +490,7 @@ def load_scene(spec: str | os.PathLike) -> Scene:
     if path.suffix.lower() == ".toml":
         return scene_from_toml(path)
     pos, faces = load_mesh(path)
-    return _assemble([(path.stem, pos, faces, THESIS_MATERIAL)], None, {}, f"{path}: lights", str(path))
+    return _assemble(
+        [(path.stem, pos, faces, THESIS_MATERIAL)], None, {}, f"{path}: lights", str(path), wheres=[str(path)],
+        origins=["the mesh"],
+    )

@@ -8,6 +8,7 @@ from lodprt.bake import _Baker, bake, load_kernels, material_tables
 from lodprt.kernels import shading as kshade
 from lodprt.kernels.visibility import LIT
 from lodprt.devices import warp
+from lodprt.errors import LodprtError
 from lodprt.scene import THESIS_MATERIAL, Material, _assemble, load_mesh
 
 
@@ -185,3 +186,38 @@ def test_bake_scales_with_the_scene(device, bunny_path, scale):
     assert np.mean(v1 != v2) < 1e-3
     same = (v1 == v2)
     np.testing.assert_allclose(c2[same] * scale**2, c1[same], rtol=2e-4, atol=1e-4 * np.abs(c1).max())
+
+
+def test_lodprt_bake_callable_after_module_import():
+    """``lodprt.bake(...)`` stays the bake function even after ``import lodprt.bake`` bound the module there."""
+    import lodprt
+    import lodprt.bake as module
+
+    assert lodprt.bake is module and callable(lodprt.bake)
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
+    scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
+    with pytest.raises(LodprtError, match="threshold_deg"):
+        lodprt.bake(scene, None, device="cpu", hierarchy=False, threshold_deg=30.0)
+
+
+def test_ray_offset_is_a_python_float_far_from_the_origin():
+    """A small scene far from the origin: the float32-resolution ray offset is a Python float (attributes are JSON)."""
+    from lodprt.bake import ray_offset
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]]) * 1e-3 + 1e3
+    scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
+    offset = ray_offset(scene)
+    assert type(offset) is float and offset > 1e-4 * scene.diagonal
+
+
+def test_non_finite_coefficients_stop_the_bake_naming_the_sample():
+    """NaN or infinite coefficients (what the scene limits miss) raise a LodprtError naming scene and light sample."""
+    from lodprt.bake import _check_finite
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
+    scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
+    coeffs = np.ones((3, 1, 4), np.float32)
+    _check_finite(scene, 0, np.zeros(3), coeffs)
+    coeffs[1, 0, 2] = np.inf
+    with pytest.raises(LodprtError, match=r"tri: light sample 2 at \[0.0, 1.0, 0.0\]: 1 vertices"):
+        _check_finite(scene, 2, np.array([0.0, 1.0, 0.0]), coeffs)

@@ -39,6 +39,16 @@ def test_bunny_keeps_file_vertex_order(bunny_path):
     assert len(np.unique(faces)) == 34834
 
 
+def test_obj_with_several_materials_keeps_file_vertices(tmp_path):
+    """An OBJ with two usemtl groups (trimesh splits it per material) keeps its 5 vertices in file order, both faces."""
+    write(tmp_path, "m.mtl", "newmtl a\nKd 1 0 0\nnewmtl b\nKd 0 1 0\n")
+    groups = "usemtl a\nf 1 4 3\nusemtl b\nf 1 3 2\n"
+    path = write(tmp_path, "mm.obj", "mtllib m.mtl\n" + QUAD_OBJ.replace("f 1 4 3 2\n", groups))
+    pos, faces = load_mesh(path)
+    np.testing.assert_array_equal(pos, [[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1], [5, 5, 5]])
+    assert sorted(map(tuple, faces.tolist())) == [(0, 2, 1), (0, 3, 2)]
+
+
 def test_quads_triangulated_and_unreferenced_vertex_has_finite_normal(tmp_path):
     """A quad becomes two triangles; an unreferenced vertex is kept, unbaked, with the +y fallback normal."""
     scene = load_scene(write(tmp_path, "q.obj", QUAD_OBJ))
@@ -135,6 +145,23 @@ def test_toml_scene_with_floor_and_materials(tmp_path):
         ("[lights]\ncolour = 1\n", "colour"),
         ("[floor]\nresolution = 1\n", "resolution"),
         ("[camera]\nfov = 3\n", "camera"),
+        ("[lights]\ngrid = [100000, 100000, 100000]\n", "lights.grid"),
+        ("[lights]\nbox = [-1e300, 0, 0, 1e300, 1, 1]\n", "lights.box"),
+        ("[floor]\nresolution = 100000\n", "floor.resolution"),
+        ("[floor]\nmargin = 1e300\n", "floor.margin"),
+        ("up = \"w\"\n", "object[0].up"),
+        ("up = 3\n", "object[0].up"),
+        ("rotate = [1, 2]\n", "object[0].rotate"),
+        ("rotate = [0, nan, 0]\n", "object[0].rotate[1]"),
+        ("name = 3\n", "object[0].name"),
+        ("scale = 1e300\n", "vertices"),
+        ("ks = 1e999999\n", "ks"),
+        ("shininess = 1" + "0" * 400 + "\n", "shininess"),
+        ("[lights]\ngrid = 5\n", "lights.grid"),
+        ("kd = 2e6\n", "kd[0]"),
+        ("[lights]\nintensity = [1, 1, 1e13]\n", "lights.intensity[2]"),
+        ("[lights]\nradius = 1e-13\n", "lights.radius"),
+        ("scale = 1e-12\n", "diagonal"),
     ],
 )
 def test_bad_toml_fields_name_file_and_field(tmp_path, extra, field):
@@ -144,6 +171,12 @@ def test_bad_toml_fields_name_file_and_field(tmp_path, extra, field):
         load_scene(path)
     msg = str(info.value)
     assert str(path) in msg and field in msg
+
+
+def test_empty_mesh_path_named(tmp_path):
+    """An empty 'mesh' string is refused as such, naming the file and field (not read as the scene's folder)."""
+    with pytest.raises(SceneError, match=r"s\.toml: object\[0\]\.mesh: required.*got ''"):
+        load_scene(write(tmp_path, "s.toml", '[[object]]\nmesh = ""\n'))
 
 
 def test_missing_and_unreadable_files(tmp_path):
@@ -185,3 +218,172 @@ def test_procedural_demo_fallback_builds():
     n = vertex_normals(pos, faces)
     assert np.isfinite(n).all() and np.allclose(np.linalg.norm(n, axis=1), 1)
     assert pos[:, 1].min() >= -1e-12 and pos[:, 1].max() > 0.8  # stands on y = 0, the ring upright above the slab
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# triangle strips, zero-area objects, up axis
+
+
+def strip_grid_ply(path, n=30, m=30, width=2.0, depth=3.0, seed=0):
+    """An ASCII PLY of an n x m vertex grid in the x-z plane as triangle strips, vertices stored in shuffled order.
+
+    Returns (positions as stored in the file (V, 3), number of grid triangles). Two extra vertices follow the grid:
+    a duplicate of the first and an unreferenced one, so a reader that merges or drops vertices is caught. Strips
+    are separated by -1, except one pair joined by repeated indices (degenerate triangles) as strippers write them.
+    """
+    rng = np.random.default_rng(seed)
+    xs, zs = np.meshgrid(np.linspace(0, width, n), np.linspace(0, depth, m), indexing="xy")
+    grid = np.stack([xs.ravel(), np.zeros(n * m), zs.ravel()], axis=1)
+    perm = rng.permutation(n * m)  # file vertex k is grid vertex perm[k]
+    file_of = np.argsort(perm)
+    pos = np.concatenate([grid[perm], grid[perm[:1]], [[9.0, 9.0, 9.0]]])
+    flat = []
+    for j in range(m - 1):
+        strip = [int(file_of[g]) for i in range(n) for g in (j * n + i, (j + 1) * n + i)]
+        if j == 0:
+            flat += strip
+        elif j == 1:  # joined to the previous strip: repeat its last and this one's first index (even length kept)
+            flat += [flat[-1], strip[0]] + strip
+        else:
+            flat += [-1] + strip
+    lines = [
+        "ply", "format ascii 1.0", f"element vertex {len(pos)}", "property double x", "property double y",
+        "property double z", "element tristrips 1", "property list int int vertex_indices", "end_header",
+    ]
+    lines += [" ".join(repr(float(c)) for c in p) for p in pos]
+    lines.append(" ".join(map(str, [len(flat)] + flat)))
+    path.write_text("\n".join(lines) + "\n")
+    return pos, 2 * (n - 1) * (m - 1)
+
+
+def test_tristrip_ply_read_with_file_vertex_order(tmp_path, caplog):
+    """A PLY of triangle strips is read (via pymeshlab): every vertex in file order and count, the grid's area."""
+    path = tmp_path / "strips.ply"
+    ref, triangles = strip_grid_ply(path)
+    with caplog.at_level("INFO", logger="lodprt.meshio"):
+        scene = load_scene(path)
+    assert "pymeshlab" in caplog.text
+    assert scene.num_vertices == len(ref) == 902
+    np.testing.assert_array_equal(scene.positions, ref)  # duplicate and unreferenced vertices kept, not reordered
+    p, f = scene.positions, scene.faces
+    cross = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    real = np.linalg.norm(cross, axis=1) > 0
+    assert real.sum() == triangles
+    assert 0.5 * np.linalg.norm(cross, axis=1).sum() == pytest.approx(2.0 * 3.0, rel=1e-12)
+    assert (cross[real, 1] > 0).all()  # strip parity handled: every triangle faces +y
+    assert scene.referenced.tolist()[-2:] == [False, False]
+
+
+def test_tristrip_index_past_last_vertex_is_an_error_not_a_crash(tmp_path):
+    """A strip index past the last vertex (pymeshlab segfaults on it) gives a SceneError naming file and faces."""
+    path = tmp_path / "bad.ply"
+    header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+    path.write_text(header + "element tristrips 1\nproperty list int int vertex_indices\nend_header\n"
+                    "0 0 0\n1 0 0\n0 1 0\n5 0 1 2 1000 -7\n")
+    with pytest.raises(SceneError, match=r"bad\.ply: field 'faces': no faces: trimesh read 3 vertices.*pymeshlab"):
+        load_scene(path)
+
+
+def test_point_cloud_error_says_what_each_reader_found(tmp_path):
+    """A PLY point cloud: the error says neither trimesh nor pymeshlab found faces, and why it cannot be baked."""
+    path = tmp_path / "cloud.ply"
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "end_header\n0 0 0\n1 0 0\n0 1 0\n")
+    with pytest.raises(SceneError, match=r"cloud\.ply.*trimesh read 3 vertices and no faces, pymeshlab read 3 "
+                                         r"vertices and no faces; point clouds cannot be baked"):
+        load_scene(path)
+
+
+FLAT_OBJ = "v 0 0 0\nv 1 1 1\nv 2 2 2\nv 5 5 5\nf 1 2 3\nf 1 3 4\nf 2 2 4\n"
+
+
+def test_zero_area_mesh_refused_naming_file_and_object(tmp_path):
+    """A mesh whose every face has zero area is refused, in a TOML scene and as a bare path, naming file and object."""
+    write(tmp_path, "flat.obj", FLAT_OBJ)
+    toml = write(tmp_path, "s.toml", '[[object]]\nmesh = "flat.obj"\nname = "x"\n')
+    with pytest.raises(SceneError) as info:
+        load_scene(toml)
+    assert str(info.value) == f"{toml}: object[0] (name 'x'): every face of flat.obj has zero area; nothing to bake"
+    with pytest.raises(SceneError, match=r"flat\.obj: every face of the mesh has zero area"):
+        load_scene(tmp_path / "flat.obj")
+
+
+def test_zero_area_second_object_named_and_single_degenerate_face_allowed(tmp_path):
+    """The zero-area check is per object (object[1] is named); one degenerate face among good ones is allowed."""
+    write(tmp_path, "flat.obj", FLAT_OBJ)
+    write(tmp_path, "m.obj", QUAD_OBJ + "f 1 1 2\n")
+    scene = load_scene(write(tmp_path, "ok.toml", '[[object]]\nmesh = "m.obj"\n'))
+    assert scene.faces.shape == (3, 3) and np.isfinite(scene.normals).all()
+    toml = write(tmp_path, "two.toml", '[[object]]\nmesh = "m.obj"\n[[object]]\nmesh = "flat.obj"\n')
+    with pytest.raises(SceneError, match=r"object\[1\] \(name 'flat'\): every face of flat\.obj has zero area"):
+        load_scene(toml)
+
+
+# a closed pyramid standing on z = 0.5, apex up +z, faces wound outward
+PYRAMID_Z_UP = np.array([[-1, -1, 0.5], [1, -1, 0.5], [1, 1, 0.5], [-1, 1, 0.5], [0, 0, 2.0]])
+PYRAMID_FACES = np.array([[0, 2, 1], [0, 3, 2], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+
+
+def write_obj(path, pos, faces):
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in pos]
+    lines += [f"f {a} {b} {c}" for a, b, c in faces + 1]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def signed_volume(pos, faces):
+    return np.einsum("ij,ij->i", pos[faces[:, 0]], np.cross(pos[faces[:, 1]], pos[faces[:, 2]])).sum() / 6
+
+
+def test_up_z_equals_prerotated_mesh_and_floor_lies_under_it(tmp_path):
+    """up = "z" gives the positions of the same mesh pre-rotated (x, z, -y), stands on the floor, keeps winding."""
+    assert signed_volume(PYRAMID_Z_UP, PYRAMID_FACES) > 0  # outward winding
+    write_obj(tmp_path / "z.obj", PYRAMID_Z_UP, PYRAMID_FACES)
+    rotated = PYRAMID_Z_UP[:, [0, 2, 1]] * [1, 1, -1]
+    write_obj(tmp_path / "y.obj", rotated, PYRAMID_FACES)
+    floor = "[floor]\nresolution = 3\n"
+    a = load_scene(write(tmp_path, "a.toml", '[[object]]\nmesh = "z.obj"\nup = "z"\nscale = 2\n' + floor))
+    b = load_scene(write(tmp_path, "b.toml", '[[object]]\nmesh = "y.obj"\nscale = 2\n' + floor))
+    obj = a.object_id == 0
+    np.testing.assert_array_equal(a.positions[obj], b.positions[obj])
+    np.testing.assert_allclose(a.positions[obj], 2 * rotated)
+    np.testing.assert_allclose(a.positions[~obj, 1], a.positions[obj, 1].min())  # floor at the base, y = 1
+    assert a.positions[4, 1] == a.positions[obj, 1].max() == 4.0  # apex on top
+    assert signed_volume(a.positions[obj], a.faces[: len(PYRAMID_FACES)]) > 0  # winding still outward
+    np.testing.assert_allclose(a.normals, b.normals)
+    assert a.normals[4, 1] > 0.99  # the apex normal points up
+
+
+def test_up_axes_are_proper_rotations_to_y_and_rotate_order():
+    """Every up axis maps to +y with det +1; rotate is about x, then y, then z (fixed axes, right-handed)."""
+    from lodprt.meshio import UP_AXES, rotation_matrix
+
+    for axis in UP_AXES:
+        m = rotation_matrix(axis)
+        v = np.zeros(3)
+        v["xyz".index(axis[-1])] = -1.0 if axis.startswith("-") else 1.0
+        np.testing.assert_allclose(m @ v, [0, 1, 0], atol=1e-15)
+        assert np.linalg.det(m) == pytest.approx(1.0) and np.allclose(m @ m.T, np.eye(3))
+    np.testing.assert_allclose(rotation_matrix("y", (0, 90, 0)) @ [1, 0, 0], [0, 0, -1], atol=1e-15)
+    np.testing.assert_allclose(rotation_matrix("y", (90, 0, 0)) @ [0, 1, 0], [0, 0, 1], atol=1e-15)
+    # x first, then y: +y -> +z (about x) -> +x (about y)
+    np.testing.assert_allclose(rotation_matrix("y", (90, 90, 0)) @ [0, 1, 0], [1, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(rotation_matrix("z", (0, 0, 90)) @ [0, 0, 1], [-1, 0, 0], atol=1e-15)
+
+
+def test_rotate_key_applied_after_up_before_translate(tmp_path):
+    """rotate = [0, 90, 0] on a z-up mesh: up conversion, then the rotation, then scale and translate."""
+    write_obj(tmp_path / "z.obj", PYRAMID_Z_UP, PYRAMID_FACES)
+    scene = load_scene(write(tmp_path, "r.toml", '[[object]]\nmesh = "z.obj"\nup = "z"\nrotate = [0, 90, 0]\n'
+                                                 'scale = 3\ntranslate = [10, 0, 0]\n'))
+    upright = PYRAMID_Z_UP[:, [0, 2, 1]] * [1, 1, -1]
+    turned = np.stack([upright[:, 2], upright[:, 1], -upright[:, 0]], axis=1)  # +90 about y: (x, y, z) -> (z, y, -x)
+    np.testing.assert_allclose(scene.positions, 3 * turned + [10, 0, 0], atol=1e-14)
+
+
+def test_huge_light_grid_refused_before_meshes_are_read(tmp_path):
+    """A 1e15-sample grid is refused by its sample count first (the mesh is not even looked for), naming the limit."""
+    toml = write(tmp_path, "s.toml", '[[object]]\nmesh = "absent.obj"\n[lights]\ngrid = [100000, 100000, 100000]\n')
+    with pytest.raises(SceneError, match=r"s\.toml: lights\.grid: .* asks for 1000000000000000 light samples; at "
+                                         r"most 100,000 are allowed"):
+        load_scene(toml)

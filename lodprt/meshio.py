@@ -1,0 +1,231 @@
+"""Reading one triangle mesh file, keeping the file's vertex order, and placing it in the scene (SPEC 2).
+
+Readers: trimesh first (``process=False``, ``maintain_order=True``: vertex ``i`` is the file's ``i``-th vertex).
+When trimesh finds no faces -- it reads a PLY stored as triangle strips (``element tristrips``, common in scan
+archives) as a point cloud -- pymeshlab reads the file instead. pymeshlab keeps the vertex count and order of the
+file as long as no cleaning filter runs (none does here); the two readers' vertices are compared to make sure.
+
+pymeshlab's readers are C++ and crash the process on some malformed files (a PLY strip index past the last vertex
+is a segmentation fault, an OFF face index out of range an abort), so it runs in a child process with a time
+limit: a bad file becomes a SceneError, never a crashed or hung bake.
+
+Placement: positions are rotated so that the file's up axis becomes +y (``up``), then rotated by ``rotate``
+(degrees about x, then y, then z, fixed axes, right-handed), scaled uniformly and translated. Every rotation is
+proper (determinant +1), so triangles keep their winding and normals recomputed from faces follow the geometry.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from lodprt.errors import SceneError
+
+log = logging.getLogger(__name__)
+
+#: Largest allowed absolute coordinate after placement. The kernels work in float32, whose largest finite value is
+#: about 3.4e38: squared distances between points up to 2e18 apart stay finite, so every coordinate must be below.
+COORDINATE_LIMIT = 1e18
+
+#: Seconds the pymeshlab child process may take to read one file before it counts as hung.
+PYMESHLAB_TIMEOUT = 600.0
+
+#: The file's up axis -> the proper rotation (rows) that turns it into +y. "z": -90 degrees about x,
+#: (x, y, z) -> (x, z, -y); "-z": +90 degrees about x; "x": +90 degrees about z, (x, y, z) -> (-y, x, z);
+#: "-x": -90 degrees about z; "-y": 180 degrees about x.
+UP_AXES: dict[str, np.ndarray] = {
+    "y": np.eye(3),
+    "-y": np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]]),
+    "z": np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]),
+    "-z": np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]),
+    "x": np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]),
+    "-x": np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]]),
+}
+
+
+def rotation_matrix(up: str = "y", rotate=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """(3, 3) rotation applied to column vectors: up-axis conversion, then ``rotate`` about x, then y, then z."""
+    if not isinstance(up, str) or up not in UP_AXES:
+        raise SceneError(f"up: expected one of {', '.join(map(repr, UP_AXES))}, got {up!r}")
+    rx, ry, rz = np.radians(np.asarray(rotate, dtype=np.float64))
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    mx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    my = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    mz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return mz @ my @ mx @ UP_AXES[up]
+
+
+def load_mesh(
+    path: str | os.PathLike,
+    *,
+    scale: float = 1.0,
+    translate=(0.0, 0.0, 0.0),
+    up: str = "y",
+    rotate=(0.0, 0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Read one triangle mesh keeping the file's vertex order; returns (positions (V,3) float64, faces (F,3) int32).
+
+    Placement order: ``up`` conversion, ``rotate``, ``scale``, ``translate`` (module docstring).
+    Raises SceneError naming the file for a missing or unreadable file, an empty mesh or point cloud, non-finite
+    or out-of-range coordinates (``COORDINATE_LIMIT``) or face indices out of range.
+    """
+    path = Path(path)
+    if not isinstance(up, str) or up not in UP_AXES:
+        raise SceneError(f"{path}: up: expected one of {', '.join(map(repr, UP_AXES))}, got {up!r}")
+    require_file(path, "mesh")
+    verts, faces, points = _read_trimesh(path)
+    reader = "trimesh"
+    if len(faces) == 0:
+        verts, faces = _fallback(path, verts, points)
+        reader = "pymeshlab (trimesh found no faces)"
+    log.info("%s: read with %s: %d vertices, %d triangles", path, reader, len(verts), len(faces))
+    _check_coordinates(path, verts, np.inf, "in the file")
+    if faces.min() < 0 or faces.max() >= len(verts):
+        raise SceneError(f"{path}: field 'faces': face indices out of range 0..{len(verts) - 1}")
+    rot = rotation_matrix(up, rotate)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below, with the vertex named
+        placed = verts @ rot.T * float(scale) + np.asarray(translate, dtype=np.float64)
+    _check_coordinates(path, placed, COORDINATE_LIMIT, "after up, rotate, scale and translate")
+    return placed, faces.astype(np.int32)
+
+
+def require_file(path: Path, what: str) -> None:
+    """SceneError unless ``path`` is a regular file; a name the OS refuses (too long, ...) is an error too, which
+    ``Path.is_file`` would raise as OSError."""
+    try:
+        ok = path.is_file()
+    except (OSError, ValueError) as exc:
+        raise SceneError(f"{path}: cannot access the {what} file: {getattr(exc, 'strerror', None) or exc}") from exc
+    if not ok:
+        raise SceneError(f"{path}: {what} file not found")
+
+
+def _check_coordinates(path: Path, verts: np.ndarray, limit: float, when: str) -> None:
+    with np.errstate(invalid="ignore"):
+        good = (np.abs(verts) < limit).all(axis=1) if limit < np.inf else np.isfinite(verts).all(axis=1)
+    if not good.all():
+        bad = np.flatnonzero(~good)
+        what = "NaN or infinite" if limit == np.inf else f"NaN, infinite or beyond +-{limit:g}"
+        raise SceneError(
+            f"{path}: field 'vertices': {len(bad)} vertices have {what} coordinates {when} "
+            f"(first: vertex {bad[0]}, {verts[bad[0]].tolist()})"
+        )
+
+
+def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices of the meshes, their faces, the vertices trimesh read as point clouds)."""
+    import trimesh
+
+    try:
+        loaded = trimesh.load_scene(str(path), process=False, maintain_order=True)
+        mesh = loaded.to_mesh()
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise SceneError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from exc
+    clouds = [g.vertices for g in loaded.geometry.values() if isinstance(g, trimesh.PointCloud)]
+    points = np.concatenate([_rows(path, "vertices", c, np.float64) for c in clouds]) if clouds else np.zeros((0, 3))
+    verts = _rows(path, "vertices", getattr(mesh, "vertices", None), np.float64)
+    faces = _rows(path, "faces", getattr(mesh, "faces", None), np.int64)
+    counts = {len(g.vertices) for g in loaded.geometry.values() if isinstance(g, trimesh.Trimesh)}
+    if len(counts) == 1:
+        verts, faces = _fold_material_copies(path, verts, faces, counts.pop())
+    return verts, faces, points
+
+
+def _fold_material_copies(path: Path, verts: np.ndarray, faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """trimesh splits an OBJ with several materials (``usemtl``) into one mesh per material, each carrying every
+    vertex of the file (``maintain_order``): concatenated, the file's vertices repeat once per material. Fold the
+    identical copies back, so vertex ``i`` stays the file's vertex ``i``."""
+    if n == 0 or len(verts) <= n or len(verts) % n:
+        return verts, faces
+    blocks = verts.reshape(-1, n, 3)
+    if not (blocks == blocks[:1]).all():
+        return verts, faces
+    log.info("%s: %d per-material copies of the %d vertices folded into one", path, len(blocks), n)
+    return blocks[0], faces % n
+
+
+def _rows(path: Path, field: str, data, dtype) -> np.ndarray:
+    """``data`` as (N, 3) rows; trimesh passes on what the file has, e.g. 2 coordinates from an OBJ line 'v 1 2'."""
+    try:
+        arr = np.asarray(data if data is not None else np.zeros((0, 3)), dtype=dtype)
+    except (ValueError, TypeError, OverflowError) as exc:  # ragged rows, or values that are not numbers
+        raise SceneError(f"{path}: field '{field}': not a table of numbers ({exc})") from exc
+    if arr.size == 0:
+        return arr.reshape(0, 3)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise SceneError(f"{path}: field '{field}': expected 3 values per row, the file gives shape {arr.shape}")
+    return arr
+
+
+def _fallback(path: Path, verts: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """pymeshlab's faces for a file trimesh found no faces in, with vertices checked against trimesh's."""
+    seen = f"trimesh read {len(verts) + len(points)} vertices and no faces"
+    try:
+        pv, pf = _read_pymeshlab(path)
+    except SceneError as exc:
+        raise SceneError(
+            f"{path}: field 'faces': no faces: {seen}, and pymeshlab could not read it: {exc}"
+        ) from exc
+    if len(pf) == 0:
+        raise SceneError(
+            f"{path}: field 'faces': no faces: {seen}, pymeshlab read {len(pv)} vertices and no faces; "
+            "point clouds cannot be baked"
+        )
+    # whatever trimesh did read must be what pymeshlab read, or store vertex i might not be the file's vertex i
+    mine = verts if len(verts) else points
+    if len(mine) and (mine.shape != pv.shape or not np.allclose(mine, pv, rtol=1e-7, atol=0.0, equal_nan=True)):
+        raise SceneError(
+            f"{path}: field 'vertices': trimesh read {len(mine)} vertices, pymeshlab {len(pv)} or at other "
+            "positions; the file's vertex ids cannot be kept"
+        )
+    return (mine if len(mine) else pv), pf
+
+
+_CHILD = """
+import sys
+import numpy as np
+import pymeshlab
+ms = pymeshlab.MeshSet()
+try:
+    ms.load_new_mesh(sys.argv[1])
+except Exception as exc:
+    sys.stderr.write(" ".join(str(exc).split()))
+    sys.exit(3)
+m = ms.current_mesh()
+np.save(sys.argv[2], np.ascontiguousarray(m.vertex_matrix(), dtype=np.float64))
+np.save(sys.argv[3], np.ascontiguousarray(m.face_matrix(), dtype=np.int64))
+"""
+
+
+def _read_pymeshlab(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) as pymeshlab reads ``path``, read in a child process (module docstring)."""
+    with tempfile.TemporaryDirectory(prefix="lodprt-meshio-") as tmp:
+        vfile, ffile = os.path.join(tmp, "v.npy"), os.path.join(tmp, "f.npy")
+        try:
+            run = subprocess.run(
+                [sys.executable, "-c", _CHILD, str(path), vfile, ffile],
+                capture_output=True,
+                text=True,
+                errors="replace",
+                timeout=PYMESHLAB_TIMEOUT,
+            )
+        except subprocess.TimeoutExpired as exc:
+            raise SceneError(f"pymeshlab took more than {PYMESHLAB_TIMEOUT:g} s") from exc
+        if run.returncode < 0:
+            try:
+                name = signal.Signals(-run.returncode).name
+            except ValueError:
+                name = f"signal {-run.returncode}"
+            raise SceneError(f"pymeshlab crashed ({name}), e.g. on a vertex index past the last vertex")
+        if run.returncode != 0:
+            detail = run.stderr.strip().splitlines()[-1:] or [f"exit status {run.returncode}"]
+            # pymeshlab repeats the file name around its reason: keep the reason
+            raise SceneError(detail[0].partition("Error details: ")[2][:300] or detail[0][:300])
+        return np.load(vfile).reshape(-1, 3), np.load(ffile).reshape(-1, 3)
