@@ -18,75 +18,48 @@ def display(x: float):
     return wp.clamp(x, 0.0, 1.0)
 
 
-@wp.kernel
-def view_errors(
-    offset: int,  # In: first row of this launch (a launch may cover a slice of the rows)
-    nodes: wp.array(dtype=wp.int32),  # In: (K,) internal nodes to evaluate
-    first_internal: int,  # In: V, the id of the first internal node (row 0 of the boxes)
-    node_pos: wp.array(dtype=wp.vec3),  # In: (N,) position of each node's vertex
-    node_collapsed: wp.array(dtype=wp.vec3),  # In: (N,) position p of the vertex each node's collapse removed
-    error_vector: wp.array(dtype=wp.vec3),  # In: (N,) p - p' (figure 10)
-    axis: wp.array(dtype=wp.vec3),  # In: (N,) normal-cone axis
-    half_angle: wp.array(dtype=wp.float32),  # In: (N,) normal-cone half-angle, radians
-    radius: wp.array(dtype=wp.float32),  # In: (N,) bounding-sphere radius at node_pos
-    planes: wp.array(dtype=wp.vec4),  # In: (6,) inward frustum planes, unit normals
-    vp: wp.mat44,  # In: projection @ view (row-major, column vectors)
-    eye: wp.vec3,  # In: camera position
-    half_w: float,  # In: half the screen width in pixels
-    half_h: float,  # In: half the screen height in pixels
-    diag: float,  # In: screen diagonal in pixels
-    used: wp.array(dtype=wp.int32),  # In: (U,) light samples with a non-zero weight
-    weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample (T-12, intensities)
-    box_centre: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box centre / white per node
-    box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
-    alpha: float,  # In: weight of e_geo (T-14)
-    basis: wp.array2d(dtype=wp.float32),  # Scratch: (K, >= ncoef); ncoef = 1 (diffuse-only store) or order^2
-    culled: wp.array(dtype=wp.uint8),  # Out: (K,) 1 when back-facing (T-13) or outside the frustum
-    err: wp.array(dtype=wp.float32),  # Out: (K,) alpha e_geo + (1 - alpha) e_lumi (T-14)
-    e_geo: wp.array(dtype=wp.float32),  # Out: (K,)
-    e_lumi: wp.array(dtype=wp.float32),  # Out: (K,)
+@wp.func
+def detail_bound(
+    k: int,  # In: row of basis
+    row: int,  # In: the node's row in detail
+    used: wp.array(dtype=wp.int32),
+    weights: wp.array2d(dtype=wp.float32),
+    detail: wp.array4d(dtype=wp.float16),
+    basis: wp.array2d(dtype=wp.float32),
+    ncoef: int,
 ):
-    k = wp.tid() + offset
-    node = nodes[k]
-    p = node_pos[node]
-    r = radius[node]
-    out = int(0)
-    for i in range(6):
-        pl = planes[i]
-        if pl[0] * p[0] + pl[1] * p[1] + pl[2] * p[2] + pl[3] < -r:
-            out = 1
-    # T-13: the whole cone faces away from every direction to the eye (widened by the sphere's angle)
-    v = eye - p
-    d = wp.length(v)
-    vh = wp.vec3(0.0, 0.0, 1.0)
-    if d > 0.0:
-        vh = v / d
-    if d > r:
-        ang = wp.acos(wp.clamp(wp.dot(vh, axis[node]), -1.0, 1.0))
-        spread = wp.asin(wp.clamp(r / d, 0.0, 1.0))
-        if ang > 1.5707963267948966 + half_angle[node] + spread:
-            out = 1
-    culled[k] = wp.uint8(out)
-    if out == 1:  # culled nodes are coarsened whatever their error: none is computed
-        e_geo[k] = 0.0
-        e_lumi[k] = 0.0
-        err[k] = 0.0
-        return
-    # e_geo: both ends of the error vector on screen, their distance over the diagonal
-    a = node_collapsed[node]
-    b = a - error_vector[node]
-    ca = vp * wp.vec4(a[0], a[1], a[2], 1.0)
-    cb = vp * wp.vec4(b[0], b[1], b[2], 1.0)
-    g = float(1.0)
-    if ca[3] > 1.0e-12 and cb[3] > 1.0e-12:
-        dx = (ca[0] / ca[3] - cb[0] / cb[3]) * half_w
-        dy = (ca[1] / ca[3] - cb[1] / cb[3]) * half_h
-        g = wp.min(wp.sqrt(dx * dx + dy * dy) / diag, 1.0)
-    # e_lumi: the display spread of the interval that holds the leaves' radiance toward the eye
-    # the SH width comes from the boxes themselves: 1 (y_0 of a diffuse-only store) or order^2
-    ncoef = wp.min(box_centre.shape[3], basis.shape[1])
-    sh_basis_fast(vh, bands_of(ncoef), basis, k)
-    row = node - first_internal
+    """S-2: max over RGB of sum_j |W_jc| sum_i D_jci |y_i| (units of white, at most 1)."""
+    channels = detail.shape[2]
+    dr = float(0.0)
+    dg = float(0.0)
+    db = float(0.0)
+    for u in range(used.shape[0]):
+        j = used[u]
+        for c in range(channels):
+            det = float(0.0)
+            for i in range(ncoef):
+                det += wp.float32(detail[row, j, c, i]) * wp.abs(basis[k, i])
+            if channels == 1 or c == 0:
+                dr += det * wp.abs(weights[j, 0])
+            if channels == 1 or c == 1:
+                dg += det * wp.abs(weights[j, 1])
+            if channels == 1 or c == 2:
+                db += det * wp.abs(weights[j, 2])
+    return wp.min(wp.max(wp.max(dr, dg), db), 1.0)
+
+
+@wp.func
+def spread_bound(
+    k: int,  # In: row of basis
+    row: int,  # In: the node's row in the boxes
+    used: wp.array(dtype=wp.int32),
+    weights: wp.array2d(dtype=wp.float32),
+    box_centre: wp.array4d(dtype=wp.float16),
+    box_half: wp.array4d(dtype=wp.float16),
+    basis: wp.array2d(dtype=wp.float32),
+    ncoef: int,
+):
+    """T-14 e_lumi: the display spread of the interval that holds the leaves' radiance toward the eye."""
     channels = box_centre.shape[2]
     hr = float(0.0)
     hg = float(0.0)
@@ -113,10 +86,118 @@ def view_errors(
                 hb += (mid + rad) * weights[j, 2]
                 lb += (mid - rad) * weights[j, 2]
     lum = wp.max(wp.max(display(hr) - display(lr), display(hg) - display(lg)), display(hb) - display(lb))
-    lum = wp.clamp(lum, 0.0, 1.0)
+    return wp.clamp(lum, 0.0, 1.0)
+
+
+@wp.kernel
+def view_errors(
+    offset: int,  # In: first row of this launch (a launch may cover a slice of the rows)
+    nodes: wp.array(dtype=wp.int32),  # In: (K,) internal nodes to evaluate
+    first_internal: int,  # In: V, the id of the first internal node (row 0 of the boxes)
+    node_pos: wp.array(dtype=wp.vec3),  # In: (N,) position of each node's vertex
+    node_collapsed: wp.array(dtype=wp.vec3),  # In: (N,) position p of the vertex each node's collapse removed
+    error_vector: wp.array(dtype=wp.vec3),  # In: (N,) p - p' (figure 10)
+    axis: wp.array(dtype=wp.vec3),  # In: (N,) normal-cone axis
+    half_angle: wp.array(dtype=wp.float32),  # In: (N,) normal-cone half-angle, radians
+    radius: wp.array(dtype=wp.float32),  # In: (N,) bounding-sphere radius at node_pos
+    planes: wp.array(dtype=wp.vec4),  # In: (6,) inward frustum planes, unit normals
+    vp: wp.mat44,  # In: projection @ view (row-major, column vectors)
+    eye: wp.vec3,  # In: camera position
+    half_w: float,  # In: half the screen width in pixels
+    half_h: float,  # In: half the screen height in pixels
+    diag: float,  # In: screen diagonal in pixels
+    focal_px: float,  # In: focal length in pixels, (height / 2) / tan(fov / 2)
+    used: wp.array(dtype=wp.int32),  # In: (U,) light samples with a non-zero weight
+    weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample (T-12, intensities)
+    box_centre: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box centre / white per node
+    box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
+    detail: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) largest |T-15 completion residual| / white
+    criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
+    exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known
+    bound: float,  # In: the error bound (the decision's threshold)
+    geo_rate: float,  # In: S-1 units of white per pixel of geometric error
+    alpha: float,  # In: weight of e_geo (T-14)
+    basis: wp.array2d(dtype=wp.float32),  # Scratch: (K, >= ncoef); ncoef = 1 (diffuse-only store) or order^2
+    culled: wp.array(dtype=wp.uint8),  # Out: (K,) 1 when back-facing (T-13) or outside the frustum
+    err: wp.array(dtype=wp.float32),  # Out: (K,) the criterion's error (S-1 or T-14); with exact = 0 an upper
+    #                                        bound where that already decides against refining
+    e_geo: wp.array(dtype=wp.float32),  # Out: (K,)
+    e_lumi: wp.array(dtype=wp.float32),  # Out: (K,)
+    footprint: wp.array(dtype=wp.float32),  # Out: (K,) radius of the node's bounding sphere on screen, pixels
+    e_detail: wp.array(dtype=wp.float32),  # Out: (K,) radiance toward the eye the subtree's completion could miss
+):
+    k = wp.tid() + offset
+    node = nodes[k]
+    p = node_pos[node]
+    r = radius[node]
+    out = int(0)
+    for i in range(6):
+        pl = planes[i]
+        if pl[0] * p[0] + pl[1] * p[1] + pl[2] * p[2] + pl[3] < -r:
+            out = 1
+    # T-13: the whole cone faces away from every direction to the eye (widened by the sphere's angle)
+    v = eye - p
+    d = wp.length(v)
+    vh = wp.vec3(0.0, 0.0, 1.0)
+    if d > 0.0:
+        vh = v / d
+    if d > r:
+        ang = wp.acos(wp.clamp(wp.dot(vh, axis[node]), -1.0, 1.0))
+        spread = wp.asin(wp.clamp(r / d, 0.0, 1.0))
+        if ang > 1.5707963267948966 + half_angle[node] + spread:
+            out = 1
+    culled[k] = wp.uint8(out)
+    if out == 1:  # culled nodes are coarsened whatever their error: none is computed
+        e_geo[k] = 0.0
+        e_lumi[k] = 0.0
+        err[k] = 0.0
+        footprint[k] = 0.0
+        e_detail[k] = 0.0
+        return
+    # screen footprint: the bounding sphere's projected radius r f / depth (unbounded when the eye is inside it)
+    cp = vp * wp.vec4(p[0], p[1], p[2], 1.0)
+    fp = float(1.0e9)
+    if cp[3] > r:
+        fp = wp.min(r * focal_px / cp[3], 1.0e9)
+    # e_geo: both ends of the error vector on screen, their distance over the diagonal
+    a = node_collapsed[node]
+    b = a - error_vector[node]
+    ca = vp * wp.vec4(a[0], a[1], a[2], 1.0)
+    cb = vp * wp.vec4(b[0], b[1], b[2], 1.0)
+    g = float(1.0)
+    if ca[3] > 1.0e-12 and cb[3] > 1.0e-12:
+        dx = (ca[0] / ca[3] - cb[0] / cb[3]) * half_w
+        dy = (ca[1] / ca[3] - cb[1] / cb[3]) * half_h
+        g = wp.min(wp.sqrt(dx * dx + dy * dy) / diag, 1.0)
+    # the SH width comes from the boxes themselves: 1 (y_0 of a diffuse-only store) or order^2
+    ncoef = wp.min(wp.min(box_centre.shape[3], detail.shape[3]), basis.shape[1])
+    sh_basis_fast(vh, bands_of(ncoef), basis, k)
+    row = node - first_internal
+    # S-1 (criterion 0): geometry in pixels at the exchange rate geo_rate, luminance weighted by pixel coverage
+    geo_term = g * diag * geo_rate
+    cover = wp.min(1.0, 3.141592653589793 * fp * fp)
     e_geo[k] = g
+    footprint[k] = fp
+    e_lumi[k] = -1.0  # -1: not computed (the decision did not need it; exact = 1 computes every term)
+    e_detail[k] = -1.0
+    if criterion == 0 and exact == 0 and (geo_term > bound or cover <= bound):
+        err[k] = wp.max(geo_term, cover)  # decided without the luminance: refine on geometry, or <= the bound
+        if geo_term <= bound:
+            err[k] = wp.min(err[k], bound)
+        return
+    det = float(0.0)
+    if criterion == 0:
+        det = detail_bound(k, row, used, weights, detail, basis, ncoef)
+        e_detail[k] = det
+        if exact == 0 and det * cover <= bound:
+            err[k] = wp.max(geo_term, det * cover)  # min(spread, detail) <= detail: at or under the bound
+            return
+    lum = spread_bound(k, row, used, weights, box_centre, box_half, basis, ncoef)
     e_lumi[k] = lum
-    err[k] = alpha * g + (1.0 - alpha) * lum
+    if criterion == 0:
+        err[k] = wp.max(geo_term, wp.min(lum, det) * cover)
+    else:
+        err[k] = alpha * g + (1.0 - alpha) * lum  # T-14
 
 
 @wp.kernel
@@ -142,27 +223,32 @@ def relight(
     ncoef = wp.min(wp.min(coeffs.shape[3], out_coeffs.shape[2]), basis.shape[1])
     sh_basis_fast(dv, bands_of(ncoef), basis, k)
     channels = coeffs.shape[2]
-    for c in range(3):
-        for i in range(ncoef):
-            out_coeffs[k, c, i] = 0.0
-    for u in range(used.shape[0]):
-        j = used[u]
-        w0 = weights[j, 0]
-        w1 = weights[j, 1]
-        w2 = weights[j, 2]
-        if channels == 1:  # grey: one coefficient read feeds R, G and B
-            for i in range(ncoef):
+    r0 = float(0.0)
+    r1 = float(0.0)
+    r2 = float(0.0)
+    # coefficient-major: each output written once, the vertex's samples read from its contiguous block
+    for i in range(ncoef):
+        s0 = float(0.0)
+        s1 = float(0.0)
+        s2 = float(0.0)
+        for u in range(used.shape[0]):
+            j = used[u]
+            if channels == 1:  # grey: one coefficient read feeds R, G and B
                 x = coeffs[v, j, 0, i]
-                out_coeffs[k, 0, i] += w0 * x
-                out_coeffs[k, 1, i] += w1 * x
-                out_coeffs[k, 2, i] += w2 * x
-        else:
-            for i in range(ncoef):
-                out_coeffs[k, 0, i] += w0 * coeffs[v, j, 0, i]
-                out_coeffs[k, 1, i] += w1 * coeffs[v, j, 1, i]
-                out_coeffs[k, 2, i] += w2 * coeffs[v, j, 2, i]
-    for c in range(3):
-        rad = float(0.0)
-        for i in range(ncoef):
-            rad += out_coeffs[k, c, i] * basis[k, i]
-        radiance[k, c] = rad
+                s0 += weights[j, 0] * x
+                s1 += weights[j, 1] * x
+                s2 += weights[j, 2] * x
+            else:
+                s0 += weights[j, 0] * coeffs[v, j, 0, i]
+                s1 += weights[j, 1] * coeffs[v, j, 1, i]
+                s2 += weights[j, 2] * coeffs[v, j, 2, i]
+        out_coeffs[k, 0, i] = s0
+        out_coeffs[k, 1, i] = s1
+        out_coeffs[k, 2, i] = s2
+        y = basis[k, i]
+        r0 += s0 * y
+        r1 += s1 * y
+        r2 += s2 * y
+    radiance[k, 0] = r0  # T-7
+    radiance[k, 1] = r1
+    radiance[k, 2] = r2

@@ -33,6 +33,17 @@ def _sample_output_args(p: argparse.ArgumentParser, output: str) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
 
 
+def _view_cut_args(p: argparse.ArgumentParser) -> None:
+    """The view cut's criterion and bounds (docs/RUNTIME.md)."""
+    p.add_argument("--criterion", choices=("screen", "thesis"), default="screen",
+                   help="view-cut criterion: 'screen' bounds the error on screen (luminance in units of white, "
+                        "geometry in pixels; default), 'thesis' is T-14's blend alpha e_geo + (1 - alpha) e_lumi")
+    p.add_argument("--error-bound", type=float, default=None, metavar="E",
+                   help="view cut error bound (default 0.08 of white for 'screen', 0.25 for 'thesis')")
+    p.add_argument("--alpha", type=float, default=0.6, metavar="A",
+                   help="'thesis' only: weight of the geometric error against the luminance error (default 0.6)")
+
+
 def _view_args(p: argparse.ArgumentParser, output: str | None, *, required: bool = True) -> None:
     """The arguments of the display commands: store, lights, camera, view cut, drawing, output."""
     p.add_argument("store", metavar="OUT.zarr")
@@ -46,8 +57,7 @@ def _view_args(p: argparse.ArgumentParser, output: str | None, *, required: bool
     p.add_argument("--up", type=float, nargs=3, default=(0.0, 1.0, 0.0), metavar=("X", "Y", "Z"), help="up direction (default +y)")
     p.add_argument("--fov", type=float, default=40.0, metavar="DEG", help="vertical field of view in degrees (default 40)")
     p.add_argument("--size", type=int, nargs=2, default=(800, 600), metavar=("W", "H"), help="image size in pixels (default 800 600)")
-    p.add_argument("--error-bound", type=float, default=0.25, metavar="E", help="view cut error bound (T-14, default 0.25)")
-    p.add_argument("--alpha", type=float, default=0.6, metavar="A", help="weight of the geometric error against the luminance error (default 0.6)")
+    _view_cut_args(p)
     p.add_argument("--full", action="store_true", help="LOD off: draw the full-resolution mesh")
     p.add_argument("--wireframe", action="store_true", help="overlay the triangles of the cut")
     p.add_argument("--per-vertex", action="store_true", help="radiance per vertex, interpolated (default: per fragment from interpolated SH)")
@@ -145,8 +155,7 @@ def _parser() -> argparse.ArgumentParser:
     fr.add_argument("store", metavar="OUT.zarr")
     fr.add_argument("--path", choices=("orbit", "dolly"), default="orbit", help="camera path (default orbit)")
     fr.add_argument("--frames", type=int, default=120, metavar="N", help="number of frames (default 120)")
-    fr.add_argument("--error-bound", type=float, default=0.25, metavar="E", help="view cut error bound (T-14, default 0.25)")
-    fr.add_argument("--alpha", type=float, default=0.6, metavar="A", help="weight of e_geo against e_lumi (default 0.6)")
+    _view_cut_args(fr)
     fr.add_argument("--triangle-budget", type=int, default=None, metavar="T", help="steer the bound toward this many triangles")
     fr.add_argument("--light", type=float, nargs=3, action="append", default=None, metavar=("X", "Y", "Z"),
                     help="fixed light position(s) instead of the moving light")
@@ -239,7 +248,7 @@ def _cmd_render(args) -> int:
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     stats = render_to_file(store, args.out, lights=lights, colors=colors, camera=camera, error_bound=args.error_bound,
-                           alpha=args.alpha, lod=not args.full, overwrite=args.overwrite, **_draw_options(args))
+                           alpha=args.alpha, criterion=args.criterion, lod=not args.full, overwrite=args.overwrite, **_draw_options(args))
     print(f"wrote {args.out}: {stats['triangles']:,} triangles ({'view cut' if stats['lod'] else 'full resolution'}), "
           f"frame {stats.get('ms_total', 0.0):.0f} ms, draw {stats['ms_draw']:.0f} ms")
     return 0
@@ -254,7 +263,8 @@ def _cmd_compare(args) -> int:
     opts = _draw_options(args)
     opts.pop("light_markers")
     numbers = compare_figure(store, args.out, lights=lights, colors=colors, camera=camera,
-                             error_bound=args.error_bound, alpha=args.alpha, overwrite=args.overwrite,
+                             error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
+                             overwrite=args.overwrite,
                              scale=args.scale, markers=not args.no_markers, **opts)
     print(f"wrote {args.out}: {numbers['triangles_lod']:,} of {numbers['triangles_full']:,} triangles, PSNR "
           f"{numbers['psnr_db']:.1f} dB, relative RMSE {numbers['relative_rmse']:.4f}")
@@ -269,6 +279,7 @@ def _cmd_turntable(args) -> int:
     lights, colors, camera = _view_setup(args, store)
     written = turntable(store, args.out, lights=lights, colors=colors, camera=camera, frames=args.frames,
                         light_turns=args.light_turns, fps=args.fps, error_bound=args.error_bound, alpha=args.alpha,
+                        criterion=args.criterion,
                         lod=not args.full, overwrite=args.overwrite, **_draw_options(args))
     print(f"wrote {written}")
     return 0
@@ -285,6 +296,7 @@ def _cmd_view(args) -> int:
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     return run_viewer(store, lights=lights, colors=colors, camera=camera, error_bound=args.error_bound,
+                      criterion=args.criterion,
                       alpha=args.alpha, lod=not args.full, frames=args.frames, screenshot=args.screenshot,
                       **_draw_options(args))
 
@@ -441,7 +453,8 @@ def _cmd_frames(args) -> int:
     if args.frames < 1:
         raise LodprtError(f"--frames {args.frames}: must be >= 1")
     store = open_store(args.store)
-    rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, triangle_budget=args.triangle_budget,
+    rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
+                  triangle_budget=args.triangle_budget,
                   device=args.device)
     rows = []
     for k, (camera, lights) in enumerate(camera_path(rt, args.path, args.frames, size=tuple(args.size), fov=args.fov)):
@@ -453,7 +466,8 @@ def _cmd_frames(args) -> int:
                                                              "ms_total")}})
     ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
     tris = np.array([r["triangles"] for r in rows])
-    summary = {"frames": len(rows), "path": args.path, "error_bound": args.error_bound, "alpha": args.alpha,
+    summary = {"frames": len(rows), "path": args.path, "criterion": rt.criterion, "error_bound": rt.error_bound,
+               "alpha": args.alpha,
                "first_frame_ms": rows[0]["ms_total"], "median_ms": float(np.median(ms)),
                "p95_ms": float(np.percentile(ms, 95)), "median_triangles": float(np.median(tris)),
                "full_triangles": int(len(store.faces)), "device": rt.device}

@@ -8,7 +8,8 @@ import numpy as np
 from lodprt.render import Renderer, auto_white, check_output, frame_source
 
 
-def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float = 0.25, alpha: float = 0.6,
+def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
+                   criterion: str = "screen",
                    overwrite: bool = False, scale: float | None = None, wireframe: bool = False,
                    per_vertex: bool = False, exposure: float = 0.0, white: float | None = None,
                    markers: bool = True) -> dict:
@@ -25,7 +26,8 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     import matplotlib.pyplot as plt
 
     out = check_output(out, (".png",), overwrite=overwrite)
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True)
+    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion)
+    error_bound = getattr(source, "error_bound", error_bound)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     lod = source.update()
@@ -35,17 +37,12 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
         white = getattr(source, "white", None) or auto_white(full.radiance)
     draw = {"per_vertex": per_vertex, "exposure": exposure, "white": white, "light_markers": markers}
     with Renderer() as r:
-        lin_lod = r.image(lod, linear=True, per_vertex=per_vertex).astype(np.float64)
-        lin_full = r.image(full, linear=True, per_vertex=per_vertex).astype(np.float64)
+        numbers, rel, covered = frame_error(r, lod, full, white, per_vertex=per_vertex)
         img_lod = r.image(lod, wireframe=wireframe, **draw)
         img_full = r.image(full, **draw)
-    covered = (lin_lod.max(2) > 0) | (lin_full.max(2) > 0)
-    rel = np.abs(lin_lod - lin_full).mean(2) / white
+    psnr, rmse = numbers["psnr_db"], numbers["relative_rmse"]
     diff = rel[covered]
     vmax = float(scale) if scale is not None else max(float(np.percentile(diff, 99.5)) if diff.size else 0.0, 1e-12)
-    mse = float(np.mean((np.minimum(lin_lod, white) - np.minimum(lin_full, white))[covered] ** 2)) / white**2
-    psnr = float(10 * np.log10(1.0 / mse)) if mse > 0 else float("inf")
-    rmse = float(np.sqrt(np.mean((lin_lod - lin_full)[covered] ** 2)) / max(np.sqrt(np.mean(lin_full[covered] ** 2)), 1e-30))
     n_lod, n_full = int(len(lod.triangles)), int(len(full.triangles))
     cmap = plt.get_cmap("inferno")
     w, h = camera.width, camera.height
@@ -61,10 +58,28 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
         ax.axis("off")
     sm = matplotlib.cm.ScalarMappable(norm=matplotlib.colors.Normalize(0, vmax), cmap=cmap)
     fig.colorbar(sm, ax=axes[2], fraction=0.046, pad=0.02).set_label("difference / white", fontsize=8)
-    fig.suptitle(f"error bound {error_bound:g}, alpha {alpha:g}: PSNR {psnr:.1f} dB (clipped at white), relative "
+    what = f"{criterion} criterion, error bound {error_bound:g}" + (f", alpha {alpha:g}" if criterion == "thesis" else "")
+    fig.suptitle(f"{what}: PSNR {psnr:.1f} dB (clipped at white), relative "
                  f"RMSE {rmse:.4f}, mean |diff| {float(diff.mean()) if diff.size else 0.0:.4f} of white", fontsize=10)
     fig.savefig(out, bbox_inches="tight", pad_inches=0.1)
     plt.close(fig)
-    return {"triangles_lod": n_lod, "triangles_full": n_full, "psnr_db": psnr, "relative_rmse": rmse,
-            "mean_difference": float(diff.mean()) if diff.size else 0.0, "max_difference": float(rel.max()),
-            "white": float(white)}
+    return {"triangles_lod": n_lod, "triangles_full": n_full, **numbers, "white": float(white)}
+
+
+def frame_error(renderer, lod, full, white: float, *, per_vertex: bool = False) -> tuple[dict, np.ndarray, np.ndarray]:
+    """The image error of frame ``lod`` against frame ``full`` (same camera), both drawn linear by ``renderer``:
+    (numbers, |lod - full| / white averaged over RGB (H, W), covered (H, W) bool). Pixels either frame covers
+    count. numbers: psnr_db (both clipped at ``white``, in units of white), relative_rmse (unclipped, over the full
+    frame's RMS), mean_difference and max_difference (of the RGB-mean difference, units of white)."""
+    lin_lod = renderer.image(lod, linear=True, per_vertex=per_vertex).astype(np.float64)
+    lin_full = renderer.image(full, linear=True, per_vertex=per_vertex).astype(np.float64)
+    covered = (lin_lod.max(2) > 0) | (lin_full.max(2) > 0)
+    rel = np.abs(lin_lod - lin_full).mean(2) / white
+    diff = rel[covered]
+    mse = float(np.mean((np.minimum(lin_lod, white) - np.minimum(lin_full, white))[covered] ** 2)) / white**2 if diff.size else 0.0
+    psnr = float(10 * np.log10(1.0 / mse)) if mse > 0 else float("inf")
+    rms_full = max(float(np.sqrt(np.mean(lin_full[covered] ** 2))) if diff.size else 0.0, 1e-30)
+    rmse = float(np.sqrt(np.mean((lin_lod - lin_full)[covered] ** 2)) / rms_full) if diff.size else 0.0
+    numbers = {"psnr_db": psnr, "relative_rmse": rmse, "mean_difference": float(diff.mean()) if diff.size else 0.0,
+               "max_difference": float(rel.max()) if rel.size else 0.0}
+    return numbers, rel, covered

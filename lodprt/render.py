@@ -654,11 +654,12 @@ class StoreFrames:
         return frame
 
 
-def frame_source(store, *, error_bound: float = 0.25, alpha: float = 0.6, lod: bool = True):
+def frame_source(store, *, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
+                 criterion: str = "screen"):
     """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut; ``lod``
     False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution)."""
     if store.has_hierarchy and hasattr(store, "runtime"):
-        return store.runtime(error_bound=error_bound, alpha=alpha, lod=lod)
+        return store.runtime(error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
     if lod:
         log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
     return StoreFrames(store)
@@ -702,12 +703,13 @@ def default_eye(store) -> tuple[float, float, float]:
     return tuple(float(x) for x in c + r * np.array([0.5, 0.9, 1.9]))
 
 
-def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float = 0.25, alpha: float = 0.6,
+def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
+                   criterion: str = "screen",
                    lod: bool = True, overwrite: bool = False, **draw) -> dict:
     """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped,
     .npy linear (H, W, 3) float32). ``draw`` keywords go to ``Renderer.draw``. Returns the frame's stats."""
     out = check_output(out, (".png", ".npy"), overwrite=overwrite)
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod)
+    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     frame = source.update()
@@ -738,7 +740,8 @@ def _rotate_about(point, centre, axis, angle: float) -> np.ndarray:
 
 
 def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, light_turns: float = 1.0,
-              fps: float = 12.0, error_bound: float = 0.25, alpha: float = 0.6, lod: bool = True,
+              fps: float = 12.0, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
+              criterion: str = "screen",
               overwrite: bool = False, **draw) -> Path:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
     turning ``light_turns`` times the other way about the same axis (clamped to the sampled light region by the
@@ -758,7 +761,7 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
     elif not out.parent.is_dir():
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod)
+    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
     images = []
     with Renderer() as renderer:
         for k in range(frames):

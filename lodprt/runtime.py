@@ -42,6 +42,7 @@ import logging
 import math
 import os
 import time
+import typing
 
 import numpy as np
 
@@ -56,6 +57,27 @@ log = logging.getLogger(__name__)
 FORCE_ROUNDS = 24
 #: a failed collapse of a node with more original edges under it than this backs off for a few frames
 BACKOFF_EDGES = 20_000
+#: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
+CRITERIA = ("screen", "thesis")
+#: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
+DEFAULT_ERROR_BOUND = {"screen": 0.08, "thesis": 0.25}
+#: "screen": the geometric error on screen, pixels, that weighs as much as the default bound (the exchange rate
+#: between pixels of displacement and units of white: 1 px = 0.08 of white at the default)
+PIXEL_TOLERANCE = 1.0
+
+
+class NodeErrors(typing.NamedTuple):
+    """Per candidate node (K,): culled (T-13 or outside the frustum), error (the criterion's, compared with the
+    bound), e_geo (error vector on screen over the diagonal, T-14), e_lumi (display spread of the leaves' radiance,
+    T-14), footprint (bounding-sphere radius on screen, pixels), e_detail (S-2: the radiance toward the eye that
+    completing the subtree from coarser vertices could miss, units of white). All 0 where culled."""
+
+    culled: np.ndarray
+    error: np.ndarray
+    e_geo: np.ndarray
+    e_lumi: np.ndarray
+    footprint: np.ndarray
+    e_detail: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,7 +176,11 @@ def view_projection(camera: Camera, bounds: np.ndarray) -> np.ndarray:
 class Runtime:
     """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
 
-    error_bound: refine above, coarsen at or below (T-14); alpha in [0, 1] weighs e_geo against e_lumi;
+    criterion: "screen" (default; S-1: the luminance spread a node could show, weighted by the pixels it
+    covers, and its geometric error in pixels against ``pixel_tolerance``, each against its own bound) or
+    "thesis" (T-14: ``alpha e_geo + (1 - alpha) e_lumi``); error_bound: refine above, coarsen at or below (None:
+    the criterion's default, DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs
+    e_geo against e_lumi (T-14 only);
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
@@ -163,11 +189,21 @@ class Runtime:
     progress(done, total): called as the light samples are completed.
     """
 
-    def __init__(self, store, *, error_bound: float = 0.25, alpha: float = 0.6, triangle_budget: int | None = None,
+    def __init__(self, store, *, error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
+                 pixel_tolerance: float = PIXEL_TOLERANCE, triangle_budget: int | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 2,
                  lod: bool = True, device: str | None = None, progress=None):
         from lodprt.devices import resolve_device
 
+        if criterion not in CRITERIA:
+            raise LodprtError(f"criterion {criterion!r}: choose one of {', '.join(CRITERIA)}")
+        self.criterion = criterion
+        p = float(pixel_tolerance)
+        if not p > 0 or not math.isfinite(p):
+            raise LodprtError(f"pixel_tolerance {pixel_tolerance}: must be a positive number of pixels")
+        self.pixel_tolerance = p
+        if error_bound is None:
+            error_bound = DEFAULT_ERROR_BOUND[criterion]
         self.device = resolve_device(device)
         self.store = store
         self.h = h = store.hierarchy()
@@ -244,21 +280,61 @@ class Runtime:
     def box_half(self) -> np.ndarray:
         return self._ensure_boxes()[1]
 
-    def _ensure_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+    def _ensure_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self._boxes is None:
             centre, half = self._coefficient_boxes()
+            detail = self._detail_boxes()
             wp = self._wp
             self._d["box_centre"] = wp.array(centre, dtype=wp.float16, device=self.device)
             self._d["box_half"] = wp.array(half, dtype=wp.float16, device=self.device)
-            self._boxes = centre, half
+            self._d["detail"] = wp.array(detail, dtype=wp.float16, device=self.device)
+            self._boxes = centre, half, detail
         return self._boxes
+
+    def _detail_boxes(self) -> np.ndarray:
+        """S-2 per light sample: for each internal node, the largest |C(v) - sum_j w_j C(q_j)| (T-15 weights over
+        the ring the collapse removed v from) over the collapses in its subtree, per coefficient, in units of
+        ``white``: (N - V, S, C, ncoef) float16. Zero where the completed field is linear (T-15 has linear
+        precision), large at shadow and highlight boundaries the subtree hides."""
+        from lodprt.completion import CHUNK
+
+        h = self.h
+        V, N = h.num_vertices, h.num_nodes
+        _, S, C, n = self.coeffs.shape
+        detail = np.zeros((N - V, S, C, n), np.float16)
+        if N == V:
+            return detail
+        plan = self.store.completion_plan()
+        c0, c1 = h.children[:, 0], h.children[:, 1]
+        big = float(np.finfo(np.float16).max)
+        for j in range(S):
+            c = self.coeffs[:, j].reshape(V, C * n) / np.float32(self.white)
+            d = np.zeros((N, C * n), np.float32)
+            for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
+                rows = slice(start, min(start + CHUNK, N - V))
+                r = max(int(plan.ring_len[rows].max()), 1)
+                interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
+                d[V + rows.start:V + rows.stop] = np.abs(c[plan.vertex[rows]] - interp)
+            for nodes in self._levels():
+                d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
+            detail[:, j] = np.clip(d[V:], 0, big).reshape(N - V, C, n)
+        return detail
+
+    def _levels(self) -> list[np.ndarray]:
+        """Internal nodes grouped by height (children always on lower levels), lowest first."""
+        from lodprt.hierarchy import node_heights
+
+        if getattr(self, "_levels_cache", None) is None:
+            hk = node_heights(self.h)
+            order = np.argsort(hk, kind="stable")
+            bounds = np.searchsorted(hk[order], np.arange(1, hk.max() + 2))
+            self._levels_cache = [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
+        return self._levels_cache
 
     def _coefficient_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """Per light sample, the box of every completed coefficient over each internal node's leaves, in units of
         ``white``: centre and half-width, each (N - V, S, C, ncoef) float16 (clipped to float16's range), made
         bottom-up one height level at a time (children always sit on lower levels)."""
-        from lodprt.hierarchy import node_heights
-
         h = self.h
         V, N = h.num_vertices, h.num_nodes
         _, S, C, n = self.coeffs.shape
@@ -266,10 +342,7 @@ class Runtime:
         half = np.zeros((N - V, S, C, n), np.float16)
         if N == V:
             return centre, half
-        hk = node_heights(h)
-        order = np.argsort(hk, kind="stable")
-        bounds = np.searchsorted(hk[order], np.arange(1, hk.max() + 2))
-        levels = [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
+        levels = self._levels()
         c0, c1 = h.children[:, 0], h.children[:, 1]
         big = float(np.finfo(np.float16).max)
         for j in range(S):
@@ -389,11 +462,13 @@ class Runtime:
         return self.camera
 
     # -- errors ------------------------------------------------------------------------------------------------
-    def node_errors(self, nodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def node_errors(self, nodes, *, exact: bool = True) -> NodeErrors:
         """For internal ``nodes`` (K,): culled (K,) bool (T-13 back-facing or outside the frustum), error (K,)
         ``alpha e_geo + (1 - alpha) e_lumi`` (T-14), e_geo (K,), e_lumi (K,) (all 0 where culled: a culled node
         is coarsened whatever its error); float32 Warp kernel
-        (``lodprt.kernels.runtime.view_errors``) on the Runtime's device."""
+        (``lodprt.kernels.runtime.view_errors``) on the Runtime's device. ``exact=False`` (the frame loop) stops a
+        node's evaluation once its refine/coarsen decision is known: its error is then an upper bound when at or
+        under the bound, and e_lumi / e_detail read -1 where they were not needed."""
         from lodprt.kernels import runtime as kr
 
         if self.camera is None:
@@ -401,7 +476,7 @@ class Runtime:
         wp, dev, d = self._wp, self.device, self._d
         nodes = np.asarray(nodes, np.int32)
         K = len(nodes)
-        outs = [wp.zeros(K, dtype=wp.uint8, device=dev)] + [wp.zeros(K, dtype=wp.float32, device=dev) for _ in range(3)]
+        outs = [wp.zeros(K, dtype=wp.uint8, device=dev)] + [wp.zeros(K, dtype=wp.float32, device=dev) for _ in range(5)]
         if K:
             cam = self.camera
             used, weights = self._frame_inputs()
@@ -411,13 +486,39 @@ class Runtime:
                 d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self._planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self._vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
-                0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), used, weights,
-                d["box_centre"], d["box_half"], self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
+                0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self._focal_px(), used, weights,
+                d["box_centre"], d["box_half"], d["detail"], CRITERIA.index(self.criterion), int(bool(exact)),
+                float(self.error_bound), self._geo_rate(), self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
-        culled, err, geo, lumi = (o.numpy() for o in outs)
-        return culled.astype(bool), err.astype(np.float64), geo.astype(np.float64), lumi.astype(np.float64)
+        culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
+        return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))
 
-    def node_errors_reference(self, nodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _geo_rate(self) -> float:
+        """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance)."""
+        return DEFAULT_ERROR_BOUND["screen"] / self.pixel_tolerance
+
+    def _focal_px(self) -> float:
+        """Focal length of the camera in pixels: (height / 2) / tan(fov / 2)."""
+        return 0.5 * self.camera.height / math.tan(math.radians(self.camera.fov) / 2)
+
+    def _criterion(self, culled, e_geo, e_lumi, footprint, e_detail) -> np.ndarray:
+        """The error compared with the bound (0 where culled): T-14 ``alpha e_geo + (1 - alpha) e_lumi`` for
+        "thesis"; for "screen" (S-1) ``max(E0 g_px / tau_px, min(e_lumi, e_detail) min(1, pi r_px^2))``: the
+        geometric error in
+        pixels at the exchange rate E0 / tau_px (E0 the default bound, tau_px the pixel tolerance: at the default
+        bound a node refines when it moves anything by more than tau_px) and the luminance spread weighted by the
+        share of a pixel the node's footprint covers (the spread, or the completion residual S-2 when smaller: a
+        smooth gradient spreads but interpolates well); one bound E then steers both."""
+        if self.criterion == "thesis":
+            err = self.alpha * e_geo + (1.0 - self.alpha) * e_lumi
+        else:
+            cam = self.camera
+            g_px = e_geo * math.hypot(cam.width, cam.height)
+            geo_term = g_px * self._geo_rate()
+            err = np.maximum(geo_term, np.minimum(e_lumi, e_detail) * np.minimum(1.0, np.pi * footprint ** 2))
+        return np.where(culled, 0.0, err)
+
+    def node_errors_reference(self, nodes) -> NodeErrors:
         """``node_errors`` in float64 numpy (the tests' reference for the kernel)."""
         if self.camera is None:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
@@ -453,17 +554,23 @@ class Runtime:
         y = sh.basis(vh, self.order)[:, :self.box_centre.shape[3]]  # 1 (diffuse-only store) or order^2 wide
         hi = np.zeros((len(nodes), 3))
         lo = np.zeros((len(nodes), 3))
+        det = np.zeros((len(nodes), 3))
         internal = nodes - self.h.num_vertices
+        detail = self._ensure_boxes()[2]
         for j in self._used:
             mid = (self.box_centre[internal, j].astype(np.float64) * y[:, None, :]).sum(-1)  # (K, C)
             rad = (self.box_half[internal, j].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1)
             w = self.sample_weights[j][None, :]  # C = 1 (grey) broadcasts over R, G, B
             hi += (mid + rad) * w
             lo += (mid - rad) * w
+            det += (detail[internal, j].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1) * np.abs(w)
         e_lumi = np.clip((display(hi) - display(lo)).max(1), 0.0, 1.0)
+        depth = np.c_[p, np.ones(len(p))] @ self._vp[3]  # clip w of the node centre
+        foot = np.where(depth > r, np.minimum(r * self._focal_px() / np.where(depth > r, depth, 1.0), 1e9), 1e9)
         e_geo, e_lumi = np.where(culled, 0.0, e_geo), np.where(culled, 0.0, e_lumi)  # culled: no error computed
-        err = self.alpha * e_geo + (1.0 - self.alpha) * e_lumi
-        return culled, err, e_geo, e_lumi
+        foot = np.where(culled, 0.0, foot)
+        det = np.where(culled, 0.0, np.minimum(det.max(1), 1.0))
+        return NodeErrors(culled, self._criterion(culled, e_geo, e_lumi, foot, det), e_geo, e_lumi, foot, det)
 
     # -- frames ------------------------------------------------------------------------------------------------
     def _pass(self, *, backoff: bool = False) -> tuple[int, int, int]:
@@ -485,7 +592,7 @@ class Runtime:
         fresh = self._stamp[nodes] != self._frame
         if fresh.any():
             new = nodes[fresh]
-            c, e, _, _ = self.node_errors(new)
+            c, e = self.node_errors(new, exact=False)[:2]
             self._culled[new], self._err[new], self._stamp[new] = c, e, self._frame
         culled, err = self._culled[nodes], self._err[nodes]
         k = len(rc)
@@ -582,8 +689,8 @@ class Runtime:
 
         wp, dev, d = self._wp, self.device, self._d
         A = len(vid)
-        coef = wp.zeros((A, 3, self.ncoef), dtype=wp.float32, device=dev)
-        rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
+        coef = wp.empty((A, 3, self.ncoef), dtype=wp.float32, device=dev)  # every entry is written
+        rad = wp.empty((A, 3), dtype=wp.float32, device=dev)
         if A:
             used, weights = self._frame_inputs()
             self._launch(kr.relight, A, [

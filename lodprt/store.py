@@ -362,7 +362,9 @@ class Store:
 
     @property
     def intensity(self) -> np.ndarray:
-        return np.asarray(self.root["lights"].attrs["intensity"], dtype=np.float64)
+        if "lights/intensity" not in self._cache:  # read once: the run time asks every frame
+            self._cache["lights/intensity"] = np.asarray(self.root["lights"].attrs["intensity"], dtype=np.float64)
+        return self._cache["lights/intensity"].copy()
 
     def check_sample(self, k: int) -> int:
         if not 0 <= k < self.num_samples:

@@ -311,13 +311,18 @@ class ViewerState:
 class Viewer:
     """The window loop: events change a ``ViewerState``; a changed state asks the run time for a new frame."""
 
-    def __init__(self, store, *, lights, camera, colors=None, error_bound: float = 0.25, alpha: float = 0.6,
+    def __init__(self, store, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
+                 criterion: str = "screen",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True):
         _check_display()
         import moderngl_window
         from moderngl_window.conf import settings
 
+        if error_bound is None:
+            from lodprt.runtime import DEFAULT_ERROR_BOUND
+
+            error_bound = DEFAULT_ERROR_BOUND.get(criterion, 0.25)
         self.state = ViewerState(camera=camera, lights=np.asarray(lights, np.float64).reshape(-1, 3).copy(),
                                  colors=None if colors is None else np.asarray(colors, np.float64).reshape(-1, 3),
                                  error_bound=error_bound, alpha=alpha, lod=lod, wireframe=wireframe,
@@ -331,7 +336,7 @@ class Viewer:
             self.window = moderngl_window.create_window_from_settings()
         except Exception as exc:  # no X server behind DISPLAY, no GLX, no OpenGL 3.3
             raise LodprtError(f"cannot open a window on DISPLAY={os.environ.get('DISPLAY')!r}: {exc}") from exc
-        self.source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod)  # after the window: fail fast
+        self.source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)  # after the window: fail fast
         w = self.window
         self.renderer = Renderer(w.ctx)
         self.overlay = _Overlay(w.ctx)

@@ -88,11 +88,15 @@ def pytest_configure(config):
 
         import warp as wp
 
+        import threading
+
         wp.config.mode = "debug"  # before any module is loaded: debug builds hash (and cache) apart
         launch = wp.launch
+        lock = threading.Lock()  # debug-mode CPU launches from several threads at once crash Warp 1.19 itself
 
         def named_launch(kernel, *args, **kw):  # a failed bounds check aborts: say which kernel ran last
-            print(f"[warp-debug] launch {getattr(kernel, 'key', kernel)}", file=sys.stderr, flush=True)
-            return launch(kernel, *args, **kw)
+            with lock:
+                print(f"[warp-debug] launch {getattr(kernel, 'key', kernel)}", file=sys.stderr, flush=True)
+                return launch(kernel, *args, **kw)
 
         wp.launch = named_launch

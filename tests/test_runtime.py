@@ -106,13 +106,18 @@ def test_kernel_errors_match_float64_reference(rt, device, seed):
     r.set_camera(orbit_camera(r, rng.uniform(0, 6.28), fov=rng.uniform(20, 90)))
     r.set_lights(box[:3] + rng.random((2, 3)) * (box[3:] - box[:3]), colors=rng.random((2, 3)))
     nodes = np.arange(r.h.num_vertices, r.h.num_nodes)
-    c1, e1, g1, l1 = r.node_errors(nodes)
-    c2, e2, g2, l2 = r.node_errors_reference(nodes)
+    c1, e1, g1, l1, f1, d1 = r.node_errors(nodes)
+    c2, e2, g2, l2, f2, d2 = r.node_errors_reference(nodes)
     assert (c1 != c2).mean() < 1e-4  # float32 ties at a plane or a cone boundary only
     ok = c1 == c2
     np.testing.assert_allclose(g1[ok], g2[ok], atol=2e-5)
     np.testing.assert_allclose(l1[ok], l2[ok], atol=2e-4)
+    np.testing.assert_allclose(d1[ok], d2[ok], atol=2e-4)
     np.testing.assert_allclose(e1[ok], e2[ok], atol=2e-4)
+    np.testing.assert_allclose(f1[ok], f2[ok], rtol=1e-4)
+    fast = r.node_errors(nodes, exact=False)  # early exits: the same refine/coarsen decision for every node
+    np.testing.assert_array_equal(fast.culled, c1)
+    np.testing.assert_array_equal(fast.error > r.error_bound, e1 > r.error_bound)
 
 
 def test_frame_relighting_matches_reference(rt, device):
@@ -154,9 +159,9 @@ def test_zero_error_bound_refines_everything_visible(store):
     assert_legal(r)
     act = np.flatnonzero(r.cut.active)
     internal = act[act >= r.h.num_vertices]
-    culled, err, _, _ = r.node_errors_reference(internal)
-    assert (culled | (err < 1e-9)).all()
-    big = Runtime(store, error_bound=1.0)  # bound at the top of the error scale: nothing needs refining
+    culled, err = r.node_errors_reference(internal)[:2]
+    assert (culled | (err < 1e-6)).all()  # float32 rounding of a sub-nanopixel geometric error
+    big = Runtime(store, error_bound=1.0, criterion="thesis")  # T-14 at the top of its scale: nothing refines
     f = converge(big, orbit_camera(big, 0.3, dist=1.2, height=0.8))
     assert f.stats["refined"] == 0 and f.stats["active_nodes"] == len(r.h.roots)
 
@@ -192,7 +197,7 @@ def test_culling_is_conservative(store):
     r = Runtime(store)
     r.set_camera(orbit_camera(r, 1.1, dist=0.5, height=0.3, fov=30))
     nodes = np.arange(r.h.num_vertices, r.h.num_nodes)
-    culled, _, _, _ = r.node_errors_reference(nodes)
+    culled = r.node_errors_reference(nodes).culled
     planes = clip_planes(view_projection(r.camera, r.bounds))
     eye = np.asarray(r.camera.eye)
     rng = np.random.default_rng(3)
@@ -213,7 +218,8 @@ def test_lumi_error_bounds_the_leaf_spread(store):
     r.set_camera(orbit_camera(r, 0.4))
     r.set_lights([store.light_positions[1] * 0.6 + store.light_positions[4] * 0.4])
     nodes = np.random.default_rng(1).choice(np.arange(r.h.num_vertices, r.h.num_nodes), 400, replace=False)
-    culled, _, _, lumi = r.node_errors_reference(nodes)
+    ne = r.node_errors_reference(nodes)
+    culled, lumi = ne.culled, ne.e_lumi
     nodes, lumi = nodes[~culled], lumi[~culled]  # culled nodes get no error (they are coarsened regardless)
     assert len(nodes) > 100
     coef = r.coefficients()
@@ -248,7 +254,7 @@ def test_triangle_budget_steers_the_count(store):
     r = Runtime(store, error_bound=0.01, triangle_budget=3000)
     cam = orbit_camera(r, 0.2)
     counts = []
-    for _ in range(40):
+    for _ in range(60):  # coarsening from ~32k triangles runs a few hundred collapses a frame
         r.set_camera(cam)
         counts.append(r.update().stats["triangles"])
     assert counts[0] > 3000 and counts[-1] <= 3000
