@@ -185,18 +185,15 @@ def view_errors(
         if geo_term <= bound:
             err[k] = wp.min(err[k], bound)
         return
-    det = float(0.0)
     if criterion == 0:
         det = detail_bound(k, row, used, weights, detail, basis, ncoef)
         e_detail[k] = det
-        if exact == 0 and det * cover <= bound:
-            err[k] = wp.max(geo_term, det * cover)  # min(spread, detail) <= detail: at or under the bound
+        err[k] = wp.max(geo_term, det * cover)  # S-1 with S-2
+        if exact == 0:
             return
     lum = spread_bound(k, row, used, weights, box_centre, box_half, basis, ncoef)
     e_lumi[k] = lum
-    if criterion == 0:
-        err[k] = wp.max(geo_term, wp.min(lum, det) * cover)
-    else:
+    if criterion == 1:
         err[k] = alpha * g + (1.0 - alpha) * lum  # T-14
 
 

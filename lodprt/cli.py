@@ -39,7 +39,7 @@ def _view_cut_args(p: argparse.ArgumentParser) -> None:
                    help="view-cut criterion: 'screen' bounds the error on screen (luminance in units of white, "
                         "geometry in pixels; default), 'thesis' is T-14's blend alpha e_geo + (1 - alpha) e_lumi")
     p.add_argument("--error-bound", type=float, default=None, metavar="E",
-                   help="view cut error bound (default 0.08 of white for 'screen', 0.25 for 'thesis')")
+                   help="view cut error bound (default 0.2 of white for 'screen', 0.25 for 'thesis')")
     p.add_argument("--alpha", type=float, default=0.6, metavar="A",
                    help="'thesis' only: weight of the geometric error against the luminance error (default 0.6)")
 

@@ -60,9 +60,9 @@ BACKOFF_EDGES = 20_000
 #: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
 CRITERIA = ("screen", "thesis")
 #: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
-DEFAULT_ERROR_BOUND = {"screen": 0.08, "thesis": 0.25}
+DEFAULT_ERROR_BOUND = {"screen": 0.2, "thesis": 0.25}
 #: "screen": the geometric error on screen, pixels, that weighs as much as the default bound (the exchange rate
-#: between pixels of displacement and units of white: 1 px = 0.08 of white at the default)
+#: between pixels of displacement and units of white: 1 px = 0.2 of white at the default)
 PIXEL_TOLERANCE = 1.0
 
 
@@ -292,10 +292,12 @@ class Runtime:
         return self._boxes
 
     def _detail_boxes(self) -> np.ndarray:
-        """S-2 per light sample: for each internal node, the largest |C(v) - sum_j w_j C(q_j)| (T-15 weights over
-        the ring the collapse removed v from) over the collapses in its subtree, per coefficient, in units of
-        ``white``: (N - V, S, C, ncoef) float16. Zero where the completed field is linear (T-15 has linear
-        precision), large at shadow and highlight boundaries the subtree hides."""
+        """S-2 per light sample: for each internal node, the largest of (a) |C(v) - sum_j w_j C(q_j)| over the
+        collapses in its subtree (T-15 weights over the ring the collapse removed v from) and (b) |C(v) - C(q)|
+        over its leaves v and their original neighbours q, per coefficient, in units of ``white``:
+        (N - V, S, C, ncoef) float16. (a) is zero where the completed field is linear (T-15 has linear precision);
+        (b) is one edge's step, small on smooth fields and large at a shadow or highlight boundary that runs next
+        to the subtree (between two subtrees, where neither's own collapses see it)."""
         from lodprt.completion import CHUNK
 
         h = self.h
@@ -307,18 +309,31 @@ class Runtime:
         plan = self.store.completion_plan()
         c0, c1 = h.children[:, 0], h.children[:, 1]
         big = float(np.finfo(np.float16).max)
+        ring_v, ring_q, starts = self._leaf_rings()
         for j in range(S):
             c = self.coeffs[:, j].reshape(V, C * n) / np.float32(self.white)
             d = np.zeros((N, C * n), np.float32)
+            if len(ring_v):  # leaves: the largest step to an original neighbour (a shadow edge between subtrees)
+                d[ring_v[starts]] = np.maximum.reduceat(np.abs(c[ring_v] - c[ring_q]), starts, axis=0)
             for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
                 rows = slice(start, min(start + CHUNK, N - V))
                 r = max(int(plan.ring_len[rows].max()), 1)
                 interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
-                d[V + rows.start:V + rows.stop] = np.abs(c[plan.vertex[rows]] - interp)
+                d[V + rows.start:V + rows.stop] = np.abs(c[plan.vertex[rows]] - interp)  # T-15 residual
             for nodes in self._levels():
                 d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
             detail[:, j] = np.clip(d[V:], 0, big).reshape(N - V, C, n)
         return detail
+
+    def _leaf_rings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every original edge in both directions, sorted by its first vertex: (v, q, start of each v's run)."""
+        f = self.faces
+        e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        e = np.concatenate([e, e[:, ::-1]])
+        e = e[e[:, 0] != e[:, 1]]
+        e = e[np.argsort(e[:, 0], kind="stable")]
+        starts = np.flatnonzero(np.r_[True, e[1:, 0] != e[:-1, 0]]) if len(e) else np.zeros(0, np.int64)
+        return e[:, 0], e[:, 1], starts
 
     def _levels(self) -> list[np.ndarray]:
         """Internal nodes grouped by height (children always on lower levels), lowest first."""
@@ -503,19 +518,19 @@ class Runtime:
 
     def _criterion(self, culled, e_geo, e_lumi, footprint, e_detail) -> np.ndarray:
         """The error compared with the bound (0 where culled): T-14 ``alpha e_geo + (1 - alpha) e_lumi`` for
-        "thesis"; for "screen" (S-1) ``max(E0 g_px / tau_px, min(e_lumi, e_detail) min(1, pi r_px^2))``: the
+        "thesis"; for "screen" (S-1) ``max(E0 g_px / tau_px, e_detail min(1, pi r_px^2))``: the
         geometric error in
         pixels at the exchange rate E0 / tau_px (E0 the default bound, tau_px the pixel tolerance: at the default
         bound a node refines when it moves anything by more than tau_px) and the luminance spread weighted by the
-        share of a pixel the node's footprint covers (the spread, or the completion residual S-2 when smaller: a
-        smooth gradient spreads but interpolates well); one bound E then steers both."""
+        share of a pixel the node's footprint covers (S-2: the completion residuals and edge steps under the node,
+        not its spread: a smooth gradient spreads but interpolates well); one bound E then steers both."""
         if self.criterion == "thesis":
             err = self.alpha * e_geo + (1.0 - self.alpha) * e_lumi
         else:
             cam = self.camera
             g_px = e_geo * math.hypot(cam.width, cam.height)
             geo_term = g_px * self._geo_rate()
-            err = np.maximum(geo_term, np.minimum(e_lumi, e_detail) * np.minimum(1.0, np.pi * footprint ** 2))
+            err = np.maximum(geo_term, e_detail * np.minimum(1.0, np.pi * footprint ** 2))
         return np.where(culled, 0.0, err)
 
     def node_errors_reference(self, nodes) -> NodeErrors:

@@ -1,0 +1,145 @@
+"""The view cut keeps what the eye sees (criterion "screen", S-1/S-2): a hard shadow's boundary, a highlight on a
+plane; a plain lit plane coarsens to its corners; the triangle count is monotone in the bound. Images are compared
+with the full-resolution frame drawn by the same renderer (``lodprt.compare.frame_error``)."""
+
+import numpy as np
+import pytest
+import trimesh
+
+pytestmark = pytest.mark.usefixtures("gl")
+
+
+def grid_plane(n: int, size: float) -> trimesh.Trimesh:
+    """An n x n vertex grid in the y = 0 plane, side ``size``, centred on the origin, facing +y."""
+    t = np.linspace(-size / 2, size / 2, n)
+    x, z = np.meshgrid(t, t, indexing="ij")
+    v = np.c_[x.ravel(), np.zeros(n * n), z.ravel()]
+    i = np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]
+    a, b, c, d = i.ravel(), i.ravel() + n, i.ravel() + n + 1, i.ravel() + 1
+    return trimesh.Trimesh(v, np.r_[np.c_[a, d, c], np.c_[a, c, b]], process=False)
+
+
+def bake_scene(tmp_path, objects: dict, *, light, ks=0.0, shininess=2.0, falloff="none", order=4):
+    """Bake a TOML scene of ``objects`` (name -> trimesh) with one light sample at ``light``: the store."""
+    from lodprt.bake import bake
+    from lodprt.scene import load_scene
+    from lodprt.store import open_store
+
+    lines = []
+    for name, mesh in objects.items():
+        mesh.export(tmp_path / f"{name}.obj")
+        lines += ["[[object]]", f'mesh = "{name}.obj"', f"ks = {ks}", f"shininess = {shininess}", "kd = 0.6"]
+    lo, hi = np.asarray(light) - 0.01, np.asarray(light) + 0.01
+    lines += ["[lights]", "grid = [1, 1, 1]", f"box = {[*lo.tolist(), *hi.tolist()]}", f'falloff = "{falloff}"']
+    (tmp_path / "s.toml").write_text("\n".join(lines) + "\n")
+    bake(load_scene(tmp_path / "s.toml"), tmp_path / "s.zarr", sh_order=order, device="cpu", threshold_deg=5.0)
+    return open_store(tmp_path / "s.zarr")
+
+
+def frames(store, camera, **options):
+    """(view-cut frame, full-resolution frame, the Runtime) for the store's only light sample."""
+    from lodprt.runtime import Runtime
+
+    rt = Runtime(store, device="cpu", **options)
+    rt.set_lights(store.light_positions[:1])
+    rt.set_camera(camera)
+    lod = rt.update(max_passes=10_000)
+    rt.check()
+    rt.set_lod(False)
+    return lod, rt.update(), rt
+
+
+@pytest.fixture(scope="module")
+def box_shadow(tmp_path_factory):
+    """A 0.3-wide box floating over a 121 x 121 plane, a point light above it: a hard shadow."""
+    box = trimesh.creation.box((0.3, 0.1, 0.3))
+    box.apply_translation((0.0, 0.4, 0.0))
+    return bake_scene(tmp_path_factory.mktemp("box"), {"plane": grid_plane(121, 2.0), "box": box},
+                      light=(0.1, 1.5, 0.05))
+
+
+def top_camera(**kw):
+    from lodprt.runtime import Camera
+
+    return Camera(eye=(0.0, 2.2, 0.8), target=(0.0, 0.0, 0.0), width=kw.get("width", 240), height=kw.get("height", 180))
+
+
+def box_pixels(cam) -> np.ndarray:
+    """(H, W) bool: the screen rectangle around the floating box's projection (its corners), widened by 3 pixels."""
+    from lodprt.render import camera_matrices
+
+    corners = np.array([[x, y, z] for x in (-0.15, 0.15) for y in (0.35, 0.45) for z in (-0.15, 0.15)])
+    view, proj = camera_matrices(cam, corners)
+    c = np.c_[corners, np.ones(8)] @ (proj @ view).T
+    px = (c[:, 0] / c[:, 3] + 1) / 2 * cam.width
+    py = (1 - c[:, 1] / c[:, 3]) / 2 * cam.height
+    yy, xx = np.mgrid[: cam.height, : cam.width]
+    return (xx >= px.min() - 3) & (xx <= px.max() + 3) & (yy >= py.min() - 3) & (yy <= py.max() + 3)
+
+
+def test_hard_shadow_boundary_is_kept(box_shadow):
+    """A mid-grey plane (white set at 2.5 x its radiance, as when something brighter is in view) with a box's hard
+    shadow: at the default bound the view cut keeps the shadow boundary (99% of the boundary's pixels within the
+    bound of full resolution, the frame within 35 dB) with half the triangles or fewer; T-14 at its defaults
+    smears it (its boundary error at least 4 times larger and over 0.1 of white: the check tells them apart)."""
+    from scipy import ndimage
+
+    from lodprt.compare import frame_error
+    from lodprt.render import Renderer
+    from lodprt.runtime import DEFAULT_ERROR_BOUND
+
+    cam = top_camera()
+    white = 2.5 * 0.6  # kd 0.6, no falloff, N.L about 1 on the lit plane
+    bound = DEFAULT_ERROR_BOUND["screen"]
+    with Renderer() as r:
+        lod, full, rt = frames(box_shadow, cam, white=white)
+        numbers, rel, covered = frame_error(r, lod, full, white)
+        ref = r.image(full, linear=True).mean(2) / white
+        lit = ref > 0.2
+        edge = covered & ~box_pixels(cam) & ndimage.binary_dilation(lit, iterations=2) & \
+            ndimage.binary_dilation(~lit, iterations=2)
+        assert edge.sum() > 100
+        screen = np.percentile(rel[edge], 99)
+        assert screen <= bound and numbers["psnr_db"] >= 35.0, (screen, numbers)
+        assert len(lod.triangles) < len(full.triangles) / 2
+        thesis, full2, _ = frames(box_shadow, cam, white=white, criterion="thesis")
+        _, rel_t, _ = frame_error(r, thesis, full2, white)
+    assert np.percentile(rel_t[edge], 99) > max(4 * screen, 0.1), (screen, np.percentile(rel_t[edge], 99))
+
+
+def test_plain_lit_plane_coarsens_to_its_base(tmp_path):
+    """A plane lit evenly (a distant light without falloff, no shadow, diffuse) coarsens to the hierarchy's base
+    mesh however close the camera (nothing on it would show; the base keeps the plane's rim, which the build
+    preserves), while the same plane under a near light refines."""
+    store = bake_scene(tmp_path, {"plane": grid_plane(81, 2.0)}, light=(0.0, 1e4, 0.0))
+    lod, full, rt = frames(store, top_camera())
+    assert len(full.triangles) == 2 * 80 * 80
+    assert len(lod.vertex_ids) == len(rt.h.roots) and len(lod.triangles) < len(full.triangles) / 10
+
+
+def test_specular_highlight_on_a_plane_is_kept(tmp_path):
+    """A tight highlight on a flat glossy plane (seen in the mirror direction) stays: the highlight's pixels are
+    within the bound of full resolution and the frame within 35 dB, though the plane has no geometric error."""
+    from lodprt.compare import frame_error
+    from lodprt.render import Renderer
+    from lodprt.runtime import Camera, DEFAULT_ERROR_BOUND
+
+    store = bake_scene(tmp_path, {"plane": grid_plane(121, 2.0)}, light=(-0.4, 0.8, 0.0), ks=0.8, shininess=40.0,
+                       falloff="inverse-square", order=6)
+    cam = Camera(eye=(0.5, 0.8, 0.0), target=(0.05, 0.0, 0.0), width=240, height=180)
+    with Renderer() as r:
+        lod, full, rt = frames(store, cam)
+        numbers, rel, covered = frame_error(r, lod, full, rt.white)
+        ref = r.image(full, linear=True).mean(2) / rt.white
+    spot = covered & (ref > 0.6 * ref.max())
+    assert spot.sum() > 20
+    assert np.percentile(rel[spot], 95) <= DEFAULT_ERROR_BOUND["screen"]
+    assert numbers["psnr_db"] >= 35.0 and len(lod.triangles) < len(full.triangles) / 4
+
+
+def test_triangles_monotone_in_the_bound(box_shadow):
+    """A looser bound never keeps more triangles (each cut converged from the base at the same view)."""
+    counts = [len(frames(box_shadow, top_camera(), error_bound=e)[0].triangles)
+              for e in (0.005, 0.02, 0.05, 0.1, 0.2, 0.5)]
+    assert all(a >= b for a, b in zip(counts, counts[1:])), counts
+    assert counts[0] > counts[-1]
