@@ -7,10 +7,11 @@ degrees (the thesis' setting for its run-time figures 21-24), baked here into a 
 names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
 
 1. Camera paths (``lodprt.runtime.camera_path``): an orbit and a dolly, each with a light circling inside the
-   sampled region, error bound 0.25, alpha 0.6, 800 x 600 screen. Per frame: ``Runtime.update()`` split into cut
-   update, triangulation and relighting (ms), and triangles. Baseline in the same run: the same paths with LOD
-   off (the full mesh relit every frame by the same kernel).
-2. Error-bound sweep 0.2, 0.25, 0.315, 0.4 at alpha 0.6 over the orbit (120 frames; quick: 40): median
+   sampled region, 800 x 600 screen, two view cuts: the thesis criterion (T-14, error bound 0.25, alpha 0.6) and
+   the default "screen" criterion at its default bound. Per frame: ``Runtime.update()`` split into cut update,
+   triangulation and relighting (ms), and triangles. Baseline in the same run: the same paths with LOD off (the
+   full mesh relit every frame by the same kernel).
+2. Error-bound sweep of the thesis criterion, 0.2, 0.25, 0.315, 0.4 at alpha 0.6, over the orbit (120 frames; quick: 40): median
    triangles beside the thesis' figures 21-24, median frame time (``stats["ms_total"]`` of ``Runtime.update()``,
    as in 1.: the rendering below is not timed), and the error of the frame against the full-resolution frame:
    both drawn by ``lodprt.render.Renderer`` as linear radiance images (every 10th frame, 400 x 300) and compared
@@ -81,7 +82,7 @@ def sweep(store, device: str, frames: int, every: int) -> list[dict]:
     rows = []
     with Renderer() as renderer:
         for bound in (0.2, 0.25, 0.315, 0.4):
-            rt = store.runtime(error_bound=bound, alpha=0.6, device=device)
+            rt = store.runtime(error_bound=bound, alpha=0.6, criterion="thesis", device=device)
             tris, ms, errs, p99 = [], [], [], []
             for k, (cam, lights) in enumerate(camera_path(rt, "orbit", frames)):
                 rt.set_camera(cam)
@@ -125,19 +126,24 @@ def main():
         print(f"store {path.name}: {store.num_vertices:,} vertices, {len(store.faces):,} triangles "
               f"({time.perf_counter() - t:.0f} s)", flush=True)
         t = time.perf_counter()
-        lod = store.runtime(error_bound=0.25, alpha=0.6, device=device)
+        lod = store.runtime(error_bound=0.25, alpha=0.6, criterion="thesis", device=device)
         init_s = time.perf_counter() - t
+        screen = store.runtime(device=device)  # the default criterion and bound
         full = store.runtime(lod=False, device=device)
         paths = {}
         for kind in ("orbit", "dolly"):
-            paths[kind] = {"lod": run_path(lod, kind, frames), "full": run_path(full, kind, frames)}
+            paths[kind] = {"lod": run_path(lod, kind, frames), "screen": run_path(screen, kind, frames),
+                           "full": run_path(full, kind, frames)}
             lod.set_lod(True)  # the dolly starts again from the base mesh, like a fresh view
-            s, b = summary(paths[kind]["lod"]), summary(paths[kind]["full"])
-            print(f"{kind}: view cut {s['median_ms_total']:.1f} ms ({s['median_triangles']:,.0f} tri), full mesh "
-                  f"{b['median_ms_total']:.1f} ms ({b['median_triangles']:,.0f} tri)", flush=True)
+            screen.set_lod(True)
+            s, c, b = (summary(paths[kind][m]) for m in ("lod", "screen", "full"))
+            print(f"{kind}: view cut (thesis 0.25) {s['median_ms_total']:.1f} ms ({s['median_triangles']:,.0f} tri), "
+                  f"(screen {screen.error_bound:g}) {c['median_ms_total']:.1f} ms ({c['median_triangles']:,.0f} tri), "
+                  f"full mesh {b['median_ms_total']:.1f} ms ({b['median_triangles']:,.0f} tri)", flush=True)
         rows = []
         for kind, runs in paths.items():
-            for mode, label in (("lod", "view cut 0.25"), ("full", "full mesh")):
+            for mode, label in (("lod", "thesis 0.25"), ("screen", f"screen {screen.error_bound:g}"),
+                                ("full", "full mesh")):
                 rows.append({"path": kind, "mode": label, **summary(runs[mode])})
         for r in rows:
             base = next(x for x in rows if x["path"] == r["path"] and x["mode"] == "full mesh")
@@ -169,10 +175,11 @@ def main():
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
+    labels = {"lod": "thesis 0.25", "screen": "screen", "full": "full mesh"}
     for kind, ls in (("orbit", "-"), ("dolly", ":")):
-        for mode, col in (("lod", "C0"), ("full", "C3")):
+        for mode, col in (("lod", "C0"), ("screen", "C2"), ("full", "C3")):
             ms = [r["ms_total"] for r in paths[kind][mode][1:]]
-            axes[0].plot(ms, ls, color=col, lw=0.8, label=f"{kind}, {'view cut' if mode == 'lod' else 'full mesh'}")
+            axes[0].plot(ms, ls, color=col, lw=0.8, label=f"{kind}, {labels[mode]}")
         axes[1].plot([r["triangles"] for r in paths[kind]["lod"][1:]], ls, color="C0", lw=0.8, label=f"{kind}, view cut")
     axes[0].set_yscale("log")
     axes[0].set_xlabel("frame")

@@ -162,6 +162,10 @@ def _parser() -> argparse.ArgumentParser:
     fr.add_argument("--size", type=int, nargs=2, default=(800, 600), metavar=("W", "H"), help="screen size for e_geo (default 800 600)")
     fr.add_argument("--fov", type=float, default=40.0, metavar="DEG", help="vertical field of view (default 40)")
     fr.add_argument("--device", default=None, metavar="DEV", help="Warp device of the per-frame kernels")
+    fr.add_argument("--full", action="store_true", help="LOD off: relight the full mesh along the same path (the baseline)")
+    fr.add_argument("--error-every", type=int, default=0, metavar="K",
+                    help="every K frames, draw the frame and the full-mesh frame offscreen (--size) and report the "
+                         "image error (PSNR clipped at white, relative RMSE); 0: never (default)")
     fr.add_argument("--json", action="store_true", help="print one JSON object (frames and a summary) instead of the table")
     d = sub.add_parser(
         "diff",
@@ -452,36 +456,90 @@ def _cmd_frames(args) -> int:
 
     if args.frames < 1:
         raise LodprtError(f"--frames {args.frames}: must be >= 1")
+    if args.error_every < 0:
+        raise LodprtError(f"--error-every {args.error_every}: must be >= 0 (0: no image error)")
     store = open_store(args.store)
     rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
-                  triangle_budget=args.triangle_budget,
-                  device=args.device)
+                  triangle_budget=args.triangle_budget, device=args.device, lod=not args.full)
+    errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
-    for k, (camera, lights) in enumerate(camera_path(rt, args.path, args.frames, size=tuple(args.size), fov=args.fov)):
-        rt.set_camera(camera)
-        rt.set_lights(args.light if args.light else lights)
-        s = rt.update().stats
-        rows.append({"frame": k, **{key: s[key] for key in ("triangles", "active_nodes", "nodes_touched", "refined",
-                                                             "coarsened", "ms_cut", "ms_triangulate", "ms_relight",
-                                                             "ms_total")}})
-    ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
-    tris = np.array([r["triangles"] for r in rows])
-    summary = {"frames": len(rows), "path": args.path, "criterion": rt.criterion, "error_bound": rt.error_bound,
-               "alpha": args.alpha,
-               "first_frame_ms": rows[0]["ms_total"], "median_ms": float(np.median(ms)),
-               "p95_ms": float(np.percentile(ms, 95)), "median_triangles": float(np.median(tris)),
-               "full_triangles": int(len(store.faces)), "device": rt.device}
+    try:
+        for k, (camera, lights) in enumerate(camera_path(rt, args.path, args.frames, size=tuple(args.size),
+                                                         fov=args.fov)):
+            rt.set_camera(camera)
+            rt.set_lights(args.light if args.light else lights)
+            frame = rt.update()
+            s = frame.stats
+            rows.append({"frame": k, **{key: s[key] for key in FRAME_KEYS}})
+            if errors is not None and k % args.error_every == 0:
+                rows[-1].update(errors.measure(frame))
+    finally:
+        if errors is not None:
+            errors.close()
+    summary = _frames_summary(args, rt, store, rows)
     if args.json:
         print(json.dumps({"summary": summary, "frames": rows}, indent=2))
         return 0
-    print(f"{'frame':>5} {'triangles':>9} {'touched':>8} {'cut ms':>7} {'tri ms':>7} {'light ms':>8} {'total ms':>8}")
-    for r in rows:
-        print(f"{r['frame']:>5} {r['triangles']:>9,} {r['nodes_touched']:>8,} {r['ms_cut']:>7.2f} "
-              f"{r['ms_triangulate']:>7.2f} {r['ms_relight']:>8.2f} {r['ms_total']:>8.2f}")
-    print(f"median {summary['median_ms']:.2f} ms per frame after the first ({summary['first_frame_ms']:.0f} ms), "
-          f"p95 {summary['p95_ms']:.2f} ms; median {summary['median_triangles']:,.0f} triangles of "
-          f"{summary['full_triangles']:,} on {rt.device}")
+    _print_frames(rows, summary, rt)
     return 0
+
+
+FRAME_KEYS = ("triangles", "active_nodes", "nodes_touched", "refined", "coarsened", "ms_cut", "ms_triangulate",
+              "ms_relight", "ms_total")
+
+
+class _FrameErrors:
+    """The image error of run-time frames against the full mesh under the same camera and lights."""
+
+    def __init__(self, store, rt):
+        from lodprt.render import Renderer
+
+        self.store, self.rt = store, rt
+        self.renderer = Renderer()
+
+    def measure(self, frame) -> dict:
+        from lodprt.compare import frame_error
+        from lodprt.render import full_frame
+
+        full = full_frame(self.store, frame.camera, lights=frame.lights, colors=frame.light_colors)
+        numbers, _, _ = frame_error(self.renderer, frame, full, self.rt.white)
+        return {"psnr_db": numbers["psnr_db"], "relative_rmse": numbers["relative_rmse"]}
+
+    def close(self) -> None:
+        self.renderer.release()
+
+
+def _frames_summary(args, rt, store, rows) -> dict:
+    ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
+    tris = np.array([r["triangles"] for r in rows])
+    summary = {"frames": len(rows), "path": args.path, "lod": not args.full, "criterion": rt.criterion,
+               "error_bound": rt.error_bound, "alpha": args.alpha, "first_frame_ms": rows[0]["ms_total"],
+               "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
+               "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
+               "device": rt.device}
+    psnr = [r["psnr_db"] for r in rows if "psnr_db" in r]
+    if psnr:
+        summary["median_psnr_db"] = float(np.median(psnr))
+        summary["min_psnr_db"] = float(np.min(psnr))
+        summary["median_relative_rmse"] = float(np.median([r["relative_rmse"] for r in rows if "psnr_db" in r]))
+    return summary
+
+
+def _print_frames(rows, summary, rt) -> None:
+    has_err = "median_psnr_db" in summary
+    print(f"{'frame':>5} {'triangles':>9} {'touched':>8} {'cut ms':>7} {'tri ms':>7} {'light ms':>8} {'total ms':>8}"
+          + (f" {'PSNR dB':>8}" if has_err else ""))
+    for r in rows:
+        err = f" {r['psnr_db']:>8.1f}" if "psnr_db" in r else (" " * 9 if has_err else "")
+        print(f"{r['frame']:>5} {r['triangles']:>9,} {r['nodes_touched']:>8,} {r['ms_cut']:>7.2f} "
+              f"{r['ms_triangulate']:>7.2f} {r['ms_relight']:>8.2f} {r['ms_total']:>8.2f}{err}")
+    what = "full mesh" if not summary["lod"] else f"{rt.criterion} criterion, bound {rt.error_bound:g}"
+    print(f"{what}: median {summary['median_ms']:.2f} ms per frame after the first "
+          f"({summary['first_frame_ms']:.0f} ms), p95 {summary['p95_ms']:.2f} ms; median "
+          f"{summary['median_triangles']:,.0f} triangles of {summary['full_triangles']:,} on {rt.device}")
+    if has_err:
+        print(f"image error against the full mesh: median PSNR {summary['median_psnr_db']:.1f} dB (worst "
+              f"{summary['min_psnr_db']:.1f}), median relative RMSE {summary['median_relative_rmse']:.4f}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,144 @@
+"""View cut: image error against frame time for the two criteria ("screen", S-1/S-2, and the thesis' T-14), bound
+sweeps, on each shared model standing on a floor.
+
+    python benchmarks/view_cut.py [--quick] [--json PATH] [--device cpu|cuda] [--floor N] [--frames N]
+
+Scenes: the shared bunny, spot and fandisk, each on an N x N floor (default 200; quick: 60, bunny only), 3 x 1 x 3
+light samples in the default box, SH order 4, light cut at 5 degrees (the bake's defaults). Per criterion and bound:
+an orbit of the camera (``lodprt.runtime.camera_path``, 400 x 300, light circling above) with the median frame time
+of ``Runtime.update()`` (cut + triangulation + relighting, after the first frame) and triangles; every 8th frame
+drawn by ``lodprt.render.Renderer`` against the full-mesh frame of the same camera and lights
+(``lodprt.compare.frame_error``: PSNR clipped at white, relative RMSE). Baseline in the same run: the full mesh
+relit along the same orbit (LOD off). Writes ``benchmarks/results/view_cut.json`` and ``view_cut.png`` (error
+against time, one panel per scene).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import MODELS, environment, parser, plot_path, table, write
+
+SWEEPS = {"screen": (0.05, 0.1, 0.2, 0.4, 0.8), "thesis": (0.1, 0.2, 0.25, 0.315, 0.4)}
+MODELS_USED = ("stanford-bunny", "spot", "fandisk")
+
+
+def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
+    from lodprt.bake import bake
+    from lodprt.scene import load_scene
+
+    toml = folder / f"{name}.toml"
+    toml.write_text(f'[[object]]\nmesh = "{(MODELS / f"{name}.obj").as_posix()}"\n[floor]\nresolution = {floor}\n'
+                    "[lights]\ngrid = [3, 1, 3]\n")
+    path = folder / f"{name}.zarr"
+    bake(load_scene(toml), path, sh_order=4, device=device, threshold_deg=5.0)
+    return path
+
+
+def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
+    """Median ms and triangles along the orbit, and the image error of every ``every``-th frame."""
+    from lodprt.compare import frame_error
+    from lodprt.render import full_frame
+    from lodprt.runtime import camera_path
+
+    ms, tris, psnr, rmse = [], [], [], []
+    for k, (cam, lights) in enumerate(camera_path(rt, "orbit", frames, size=(400, 300))):
+        rt.set_camera(cam)
+        rt.set_lights(lights)
+        f = rt.update()
+        if k:
+            ms.append(f.stats["ms_total"])
+            tris.append(f.stats["triangles"])
+        if renderer is not None and k % every == 0:
+            full = full_frame(store, cam, lights=f.lights, colors=f.light_colors)
+            numbers, _, _ = frame_error(renderer, f, full, rt.white)
+            psnr.append(min(numbers["psnr_db"], 100.0))
+            rmse.append(numbers["relative_rmse"])
+    out = {"median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
+           "median_triangles": float(np.median(tris))}
+    if psnr:
+        out.update(median_psnr_db=float(np.median(psnr)), min_psnr_db=float(np.min(psnr)),
+                   mean_relative_rmse=float(np.mean(rmse)))
+    return out
+
+
+def main():
+    p = parser(__doc__.splitlines()[0])
+    p.add_argument("--floor", type=int, default=None, help="floor resolution (default 200; quick 60)")
+    p.add_argument("--frames", type=int, default=None, help="orbit frames (default 96; quick 16)")
+    args = p.parse_args()
+    from lodprt.devices import resolve_device
+    from lodprt.render import Renderer
+    from lodprt.runtime import Runtime
+    from lodprt.store import open_store
+
+    device = resolve_device(args.device)
+    floor = args.floor or (60 if args.quick else 200)
+    frames = args.frames or (16 if args.quick else 96)
+    names = MODELS_USED[:1] if args.quick else MODELS_USED
+    sweeps = {k: v[1:4:2] for k, v in SWEEPS.items()} if args.quick else SWEEPS
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="lodprt-view-cut-") as tmp, Renderer() as renderer:
+        for name in names:
+            t = time.perf_counter()
+            store = open_store(bake_scene(name, floor, Path(tmp), device))
+            print(f"{name} + {floor} floor: {store.num_vertices:,} vertices, {len(store.faces):,} triangles "
+                  f"(baked in {time.perf_counter() - t:.0f} s)", flush=True)
+            full = run_orbit(store, Runtime(store, lod=False, device=device), frames, frames, None)
+            rows.append({"scene": name, "criterion": "full mesh", "error_bound": float("nan"), **full,
+                         "median_psnr_db": float("inf"), "speedup": 1.0})
+            for criterion, bounds in sweeps.items():
+                for bound in bounds:
+                    rt = Runtime(store, criterion=criterion, error_bound=bound, device=device)
+                    r = run_orbit(store, rt, frames, 8, renderer)
+                    rows.append({"scene": name, "criterion": criterion, "error_bound": bound, **r,
+                                 "speedup": full["median_ms"] / r["median_ms"]})
+                    print(f"  {criterion} {bound:g}: {r['median_triangles']:,.0f} tri, {r['median_ms']:.1f} ms "
+                          f"(full {full['median_ms']:.1f}), PSNR {r['median_psnr_db']:.1f} dB", flush=True)
+    print()
+    print(table(rows, [("scene", "scene", "s"), ("criterion", "criterion", "s"), ("error_bound", "bound", ".3g"),
+                       ("median_triangles", "triangles", ",.0f"), ("median_ms", "median ms", ".1f"),
+                       ("p95_ms", "p95 ms", ".1f"), ("speedup", "vs full", ".2f"),
+                       ("median_psnr_db", "PSNR dB", ".1f"), ("min_psnr_db", "worst dB", ".1f")]))
+    name = "view_cut" + ("-quick" if args.quick else "")
+    print("wrote", write(name, {"benchmark": "view_cut", "quick": args.quick, "environment": environment(device),
+                                "floor": floor, "frames": frames, "rows": rows}, args.json))
+    plot(rows, names, name)
+
+
+def plot(rows: list[dict], names, name: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(names), figsize=(4.6 * len(names), 3.8), squeeze=False)
+    for ax, scene in zip(axes[0], names):
+        mine = [r for r in rows if r["scene"] == scene]
+        for criterion, colour in (("screen", "C0"), ("thesis", "C1")):
+            pts = sorted((r["median_ms"], 10 ** (-r["median_psnr_db"] / 20), r["error_bound"])
+                         for r in mine if r["criterion"] == criterion)
+            if not pts:
+                continue
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", color=colour, label=criterion)
+            for x, y, b in pts:
+                ax.annotate(f"{b:g}", (x, y), fontsize=7, xytext=(3, 2), textcoords="offset points")
+        full = next(r for r in mine if r["criterion"] == "full mesh")
+        ax.axvline(full["median_ms"], color="C3", ls="--", lw=0.8, label=f"full mesh {full['median_ms']:.0f} ms")
+        ax.set_yscale("log")
+        ax.set_xlabel("median ms per frame (cut + triangulation + relighting)")
+        ax.set_ylabel("RMSE / white (clipped), median over frames")
+        ax.set_title(scene, fontsize=10)
+        ax.legend(fontsize=7)
+    fig.suptitle("View cut: image error against frame time (lower left is better; labels: error bound)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(plot_path(name), dpi=120)
+    print("wrote", plot_path(name))
+
+
+if __name__ == "__main__":
+    main()
