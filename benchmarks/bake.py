@@ -19,7 +19,7 @@ from common import environment, parser, plot_path, table, thesis_scene, write
 
 def numpy_bake(scene, order, offset):
     """Baseline: Embree shadow rays + float64 numpy closed-form projection, one sample after another."""
-    from lodprt import reference
+    from lodprt.precompute import reference
 
     caster = reference.EmbreeCaster(scene)
     ids = np.flatnonzero(scene.referenced)
@@ -36,7 +36,7 @@ def main():
     p = parser(__doc__.splitlines()[0])
     p.add_argument("--sh-order", type=int, default=4)
     args = p.parse_args()
-    from lodprt.bake import bake, ray_offset
+    from lodprt.precompute.bake import bake, ray_offset
     from lodprt.devices import resolve_device
 
     device = resolve_device(args.device)
@@ -52,7 +52,7 @@ def main():
         rows.append({"bake": label, "seconds": res.bake_seconds, "load_s": res.load_seconds,
                      "bytes": int(np.mean([s["bytes"] for s in res.samples]))})
     # keep the coefficients of the last Warp bake to compare
-    from lodprt.bake import _Baker
+    from lodprt.precompute.bake import _Baker
 
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
     baker = _Baker(scene, order, device, ids)

@@ -26,7 +26,7 @@ def parser(description: str) -> argparse.ArgumentParser:
 
 def thesis_scene(*, quick: bool, sh_order: int | None = None):
     """The shared Stanford bunny on a 380 x 380 floor with 3 x 1 x 3 light samples (quick: 100 x 100, 2 x 1 x 1)."""
-    from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
 
     path = MODELS / "stanford-bunny.obj"
     if not path.is_file():

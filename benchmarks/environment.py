@@ -25,7 +25,7 @@ from common import MODELS, environment, parser, plot_path, table, write
 
 
 def scene_for(quick: bool):
-    from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
 
     path = MODELS / "stanford-bunny.obj"
     pos, faces = load_mesh(path)
@@ -54,8 +54,8 @@ class EmbreeBaker:
         return ids, c, v, r, o.astype(np.float32), dirs[r].astype(np.float32)
 
     def transfer(self, order, rays, bounces):
-        from lodprt import sh
-        from lodprt.transfer import fibonacci_directions
+        from lodprt.model import sh
+        from lodprt.precompute.transfer import fibonacci_directions
 
         g = self.g
         dirs = fibonacci_directions(rays).astype(np.float32).astype(np.float64)
@@ -91,7 +91,7 @@ class EmbreeBaker:
 
 
 def relit_error(t, ref, lighting, referenced):
-    from lodprt.relight import diffuse_radiance
+    from lodprt.runtime.environment_relight import diffuse_radiance
 
     a = diffuse_radiance(t[referenced], lighting)
     b = diffuse_radiance(ref[referenced], lighting)
@@ -102,10 +102,10 @@ def main():
     p = parser(__doc__.splitlines()[0])
     p.add_argument("--sh-order", type=int, default=3)
     args = p.parse_args()
-    from lodprt import environment as E
-    from lodprt import irradiance as I
+    from lodprt.model import environment as E
+    from lodprt.model import irradiance as I
     from lodprt.devices import resolve_device
-    from lodprt.transfer import Geometry, diffuse_transfer, load_kernels
+    from lodprt.precompute.transfer import Geometry, diffuse_transfer, load_kernels
 
     device = resolve_device(args.device)
     order = args.sh_order
@@ -148,8 +148,8 @@ def main():
     print(table(rows, cols))
 
     # LOD: keep vertices where transfer vectors differ (the reference 2-bounce transfer), complete the rest (T-15)
-    from lodprt.hierarchy import build_hierarchy
-    from lodprt.transfer import complete_transfer, transfer_cut
+    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.precompute.transfer import complete_transfer, transfer_cut
 
     t0 = time.perf_counter()
     tree = build_hierarchy(scene.positions, scene.faces, scene.normals)

@@ -18,7 +18,7 @@ from common import MODELS, environment, parser, plot_path, table, thesis_scene, 
 
 
 def meshes(quick: bool):
-    from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
 
     if quick:
         pos, faces = load_mesh(MODELS / "stanford-bunny.obj")
@@ -43,7 +43,7 @@ def pymeshlab_baseline(scene, target_vertices: int) -> float:
 
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
-    from lodprt.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy import build_hierarchy
 
     rows = []
     for name, scene in meshes(args.quick):

@@ -24,17 +24,18 @@ from pathlib import Path
 import numpy as np
 
 from common import environment, parser, plot_path, table, thesis_scene, write
+from lodprt.runtime import Runtime
 from table1 import EYE_OFFSET, exact_phong, rel_rmse, shadow_boundary
 
 
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
-    from lodprt import reference
-    from lodprt.bake import bake, ray_offset
+    from lodprt.precompute import reference
+    from lodprt.precompute.bake import bake, ray_offset
     from lodprt.devices import resolve_device
-    from lodprt.hierarchy import build_hierarchy
-    from lodprt.lights import LightInterpolator
-    from lodprt.store import open_store
+    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.runtime.lights import LightInterpolator
+    from lodprt.store.bake_store import open_store
 
     device = resolve_device(args.device)
     scene = thesis_scene(quick=args.quick)
@@ -60,7 +61,7 @@ def main():
             out = tmp / f"g{n}.zarr"
             res = bake(sc, out, sh_order=4, device=device, tree=tree, threshold_deg=5.0)
             store = open_store(out)
-            rt = store.runtime(lod=False, device=device)
+            rt = Runtime(store, lod=False, device=device)
             errs, edge, t12 = [], [], []
             thesis = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting="t12")
             default = rt.interp

@@ -24,10 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from common import environment, parser, plot_path, table, thesis_scene, write
+from lodprt.runtime import Runtime
 
 
 def build_store(quick: bool, folder: Path, device: str) -> Path:
-    from lodprt.bake import bake
+    from lodprt.precompute.bake import bake
 
     path = folder / "render-bench.zarr"
     bake(thesis_scene(quick=quick), path, sh_order=4, device=device, threshold_deg=5.0)
@@ -36,7 +37,7 @@ def build_store(quick: bool, folder: Path, device: str) -> Path:
 
 def measure(rt, renderer, camera, lights, frames: int, per_vertex: bool) -> dict:
     """Mean update and draw milliseconds over ``frames`` frames of a 1-degree orbit with a moving light."""
-    from lodprt.render import orbit
+    from lodprt.display.render import orbit
 
     rt.set_lights(lights)
     rt.set_camera(camera)
@@ -65,9 +66,9 @@ def main():
     p.add_argument("--store", default=None, help="use this bake store instead of baking the thesis scene")
     args = p.parse_args()
     from lodprt.devices import resolve_device
-    from lodprt.render import Renderer, scene_centre
-    from lodprt.runtime import Camera
-    from lodprt.store import open_store
+    from lodprt.display.render import Renderer, scene_centre
+    from lodprt.runtime.session import Camera
+    from lodprt.store.bake_store import open_store
 
     device = resolve_device(args.device)  # refuse an unavailable device before baking
     tmp = Path(tempfile.mkdtemp(prefix="lodprt-render-bench-"))
@@ -83,7 +84,7 @@ def main():
         frames = 3 if args.quick else 10
         sizes = [(512, 512), (1024, 1024)]
         rows = []
-        rt = store.runtime(device=device)
+        rt = Runtime(store, device=device)
         with Renderer() as renderer:
             gl = renderer.ctx.info["GL_RENDERER"]
             for size in sizes:

@@ -28,13 +28,14 @@ from pathlib import Path
 import numpy as np
 
 from common import environment, parser, plot_path, table, thesis_scene, write
+from lodprt.runtime import Runtime
 
 THESIS_TRIANGLES = {0.2: 13335, 0.25: 9115, 0.315: 5742, 0.4: 2799}
 KEYS = ("ms_cut", "ms_triangulate", "ms_relight", "ms_total", "triangles", "nodes_touched")
 
 
 def build_store(quick: bool, folder: Path, device: str) -> Path:
-    from lodprt.bake import bake
+    from lodprt.precompute.bake import bake
 
     path = folder / "runtime-bench.zarr"
     bake(thesis_scene(quick=quick), path, sh_order=4, device=device, threshold_deg=30.0)
@@ -43,7 +44,7 @@ def build_store(quick: bool, folder: Path, device: str) -> Path:
 
 def run_path(rt, path: str, frames: int) -> list[dict]:
     """Per-frame stats of ``rt`` along a camera path (the first frame, which converges from the base, kept apart)."""
-    from lodprt.runtime import camera_path
+    from lodprt.runtime.session import camera_path
 
     out = []
     for cam, lights in camera_path(rt, path, frames):
@@ -75,14 +76,14 @@ def image_error(lod_img: np.ndarray, full_img: np.ndarray) -> tuple[float, float
 
 def sweep(store, device: str, frames: int, every: int) -> list[dict]:
     """Error-bound sweep over the orbit: triangles, frame time and image error against the full mesh."""
-    from lodprt.render import Renderer
-    from lodprt.runtime import Camera, camera_path
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.session import Camera, camera_path
 
-    full = store.runtime(lod=False, device=device)
+    full = Runtime(store, lod=False, device=device)
     rows = []
     with Renderer() as renderer:
         for bound in (0.2, 0.25, 0.315, 0.4):
-            rt = store.runtime(error_bound=bound, alpha=0.6, criterion="thesis", device=device)
+            rt = Runtime(store, error_bound=bound, alpha=0.6, criterion="thesis", device=device)
             tris, ms, errs, p99 = [], [], [], []
             for k, (cam, lights) in enumerate(camera_path(rt, "orbit", frames)):
                 rt.set_camera(cam)
@@ -113,7 +114,7 @@ def main():
     p.add_argument("--store", default=None, help="use this bake store instead of baking the thesis scene")
     args = p.parse_args()
     from lodprt.devices import resolve_device
-    from lodprt.store import open_store
+    from lodprt.store.bake_store import open_store
 
     device = resolve_device(args.device)
     frames = 40 if args.quick else 240
@@ -126,10 +127,10 @@ def main():
         print(f"store {path.name}: {store.num_vertices:,} vertices, {len(store.faces):,} triangles "
               f"({time.perf_counter() - t:.0f} s)", flush=True)
         t = time.perf_counter()
-        lod = store.runtime(error_bound=0.25, alpha=0.6, criterion="thesis", device=device)
+        lod = Runtime(store, error_bound=0.25, alpha=0.6, criterion="thesis", device=device)
         init_s = time.perf_counter() - t
-        screen = store.runtime(device=device)  # the default criterion and bound
-        full = store.runtime(lod=False, device=device)
+        screen = Runtime(store, device=device)  # the default criterion and bound
+        full = Runtime(store, lod=False, device=device)
         paths = {}
         for kind in ("orbit", "dolly"):
             paths[kind] = {"lod": run_path(lod, kind, frames), "screen": run_path(screen, kind, frames),

@@ -29,7 +29,7 @@ EYE_OFFSET = np.array([0.0, 0.6, 1.6])  # in units of the objects' largest exten
 
 def exact_phong(scene, light, eye, caster, offset):
     """Direct Phong radiance toward the eye with Embree visibility (unit intensity), float64."""
-    from lodprt import reference
+    from lodprt.precompute import reference
 
     vis = reference.visibility(caster, scene, light, offset)
     p, n = scene.positions, scene.normals
@@ -66,12 +66,12 @@ def rel_max(a, b, sel):
 
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
-    from lodprt import reference
-    from lodprt.bake import bake, ray_offset
-    from lodprt.completion import CompletionPlan
+    from lodprt.precompute import reference
+    from lodprt.precompute.bake import bake, ray_offset
+    from lodprt.model.completion import CompletionPlan
     from lodprt.devices import resolve_device
-    from lodprt.hierarchy import build_hierarchy
-    from lodprt.store import open_store
+    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.store.bake_store import open_store
 
     device = resolve_device(args.device)
     scene = thesis_scene(quick=args.quick)

@@ -28,8 +28,8 @@ MODELS_USED = ("stanford-bunny", "spot", "fandisk")
 
 
 def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
-    from lodprt.bake import bake
-    from lodprt.scene import load_scene
+    from lodprt.precompute.bake import bake
+    from lodprt.model.scene import load_scene
 
     toml = folder / f"{name}.toml"
     toml.write_text(f'[[object]]\nmesh = "{(MODELS / f"{name}.obj").as_posix()}"\n[floor]\nresolution = {floor}\n'
@@ -41,9 +41,9 @@ def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
 
 def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
     """Median ms and triangles along the orbit, and the image error of every ``every``-th frame."""
-    from lodprt.compare import frame_error
-    from lodprt.render import full_frame
-    from lodprt.runtime import camera_path
+    from lodprt.display.compare import frame_error
+    from lodprt.display.render import full_frame
+    from lodprt.runtime.session import camera_path
 
     ms, tris, psnr, rmse = [], [], [], []
     for k, (cam, lights) in enumerate(camera_path(rt, "orbit", frames, size=(400, 300))):
@@ -72,9 +72,9 @@ def main():
     p.add_argument("--frames", type=int, default=None, help="orbit frames (default 96; quick 16)")
     args = p.parse_args()
     from lodprt.devices import resolve_device
-    from lodprt.render import Renderer
-    from lodprt.runtime import Runtime
-    from lodprt.store import open_store
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
 
     device = resolve_device(args.device)
     floor = args.floor or (60 if args.quick else 200)

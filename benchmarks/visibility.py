@@ -20,8 +20,8 @@ from common import environment, parser, plot_path, table, thesis_scene, write
 
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
-    from lodprt import reference
-    from lodprt.bake import _Baker, load_kernels, ray_offset
+    from lodprt.precompute import reference
+    from lodprt.precompute.bake import _Baker, load_kernels, ray_offset
     from lodprt.devices import resolve_device, warp
 
     device = resolve_device(args.device)

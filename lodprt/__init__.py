@@ -3,10 +3,10 @@
 Public API (everything else may change)::
 
     scene = lodprt.load_scene("demo")                 # or a TOML scene file or a mesh path
-    result = lodprt.bake(scene, "out.zarr", sh_order=4, device="cpu")
+    result = lodprt.precompute.bake(scene, "out.zarr", sh_order=4, device="cpu")
     store = lodprt.open_store("out.zarr")
     rgb = store.radiance(sample=0, eye=(0.0, 0.5, 1.0))   # (V, 3) float32
-    rt = lodprt.open("out.zarr").runtime(error_bound=0.25, alpha=0.6)   # moving lights, view cut
+    rt = lodprt.Runtime(store)                        # moving lights, view cut (criterion "screen")
     rt.set_lights([(0.1, 0.3, 0.0)]); rt.set_camera((0, 0.4, 1.2), (0, 0.1, 0), fov=40, width=800, height=600)
     frame = rt.update()                               # positions, triangles, coefficients, radiance, stats
     with lodprt.Renderer() as r:                      # offscreen EGL (docs/DISPLAY.md)
@@ -24,23 +24,22 @@ import importlib
 from lodprt.errors import LodprtError, SceneError, StoreError
 
 _LAZY = {
-    "Scene": "lodprt.scene",
-    "load_scene": "lodprt.scene",
-    "bake": "lodprt.bake",
-    "BakeResult": "lodprt.bake",
-    "Store": "lodprt.store",
-    "open_store": "lodprt.store",
-    "open": "lodprt.store",
-    "Runtime": "lodprt.runtime",
-    "Camera": "lodprt.runtime",
-    "Frame": "lodprt.runtime",
-    "LightInterpolator": "lodprt.lights",
-    "Renderer": "lodprt.render",
-    "Environment": "lodprt.environment",
-    "load_environment": "lodprt.environment",
-    "bake_transfer": "lodprt.transfer",
-    "open_transfer": "lodprt.relight",
-    "relit_radiance": "lodprt.relight",
+    "Scene": "lodprt.model.scene",
+    "load_scene": "lodprt.model.scene",
+    "bake": "lodprt.precompute.bake",
+    "BakeResult": "lodprt.precompute.bake",
+    "Store": "lodprt.store.bake_store",
+    "open_store": "lodprt.store.bake_store",
+    "Runtime": "lodprt.runtime.session",
+    "Camera": "lodprt.runtime.session",
+    "Frame": "lodprt.runtime.session",
+    "LightInterpolator": "lodprt.runtime.lights",
+    "Renderer": "lodprt.display.render",
+    "Environment": "lodprt.model.environment",
+    "load_environment": "lodprt.model.environment",
+    "bake_transfer": "lodprt.precompute.transfer",
+    "open_transfer": "lodprt.runtime.environment_relight",
+    "relit_radiance": "lodprt.runtime.environment_relight",
 }
 
 __all__ = ["LodprtError", "SceneError", "StoreError", *_LAZY]
@@ -49,6 +48,11 @@ __version__ = "0.1.0"
 
 
 def __getattr__(name):
+    if name == "open":  # deprecated: it shadows the builtin; kept for one release
+        import warnings
+
+        warnings.warn("lodprt.open is deprecated; use lodprt.open_store", DeprecationWarning, stacklevel=2)
+        name = "open_store"
     if name in _LAZY:
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'lodprt' has no attribute {name!r}")

@@ -29,7 +29,7 @@ def bunny_path():
 @pytest.fixture(scope="session")
 def bunny_floor(bunny_path):
     """The shared bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices)."""
-    from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
 
     pos, faces = load_mesh(bunny_path)
     return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
@@ -38,7 +38,7 @@ def bunny_floor(bunny_path):
 @pytest.fixture(scope="session")
 def bunny_hierarchy(bunny_floor):
     """The vertex hierarchy of ``bunny_floor`` (built once per test session)."""
-    from lodprt.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy import build_hierarchy
 
     return build_hierarchy(bunny_floor.positions, bunny_floor.faces, bunny_floor.normals)
 
@@ -46,7 +46,7 @@ def bunny_hierarchy(bunny_floor):
 @pytest.fixture(scope="session")
 def bunny_bake(bunny_floor, bunny_hierarchy, tmp_path_factory):
     """A light-cut bake (30 degrees, SH order 4, 3 x 1 x 3 lights) of ``bunny_floor``: the store's path."""
-    from lodprt.bake import bake
+    from lodprt.precompute.bake import bake
 
     path = tmp_path_factory.mktemp("bunny-bake") / "bunny.zarr"
     bake(bunny_floor, path, sh_order=4, device="cpu", threshold_deg=30.0, tree=bunny_hierarchy)
@@ -57,7 +57,7 @@ def bunny_bake(bunny_floor, bunny_hierarchy, tmp_path_factory):
 def gl_unavailable() -> str | None:
     """Why no offscreen OpenGL 3.3 context can be made here (None when one can)."""
     from lodprt.errors import LodprtError
-    from lodprt.render import create_context
+    from lodprt.display.render import create_context
 
     try:
         create_context().release()

@@ -3,13 +3,15 @@
 import numpy as np
 import pytest
 
-from lodprt import reference, sh
-from lodprt.bake import _Baker, bake, load_kernels, material_tables
+from lodprt.model import sh
+
+from lodprt.precompute import reference
+from lodprt.precompute.bake import _Baker, bake, load_kernels, material_tables
 from lodprt.kernels import shading as kshade
 from lodprt.kernels.visibility import LIT
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
-from lodprt.scene import THESIS_MATERIAL, Material, _assemble, load_mesh
+from lodprt.model.scene import THESIS_MATERIAL, Material, _assemble, load_mesh
 
 
 def small_scene(bunny_path, material=THESIS_MATERIAL, floor=40, lights=None):
@@ -155,7 +157,7 @@ def test_layout_leaves_out_what_the_scene_does_not_need(tmp_path, device):
     colour = _assemble([("t", pos, tri, Material((0.6, 0.3, 0.15), 0.2, 2.0))], None, light, "lights", "t")
     res = bake(colour, tmp_path / "c.zarr", sh_order=3, device=device)
     assert (res.coefficients_per_vertex, res.channels) == (9, 3)
-    from lodprt.store import open_store
+    from lodprt.store.bake_store import open_store
 
     _, c = open_store(tmp_path / "c.zarr").sample(0)
     # the specular lobe adds the same to every channel, so channel differences are kd differences
@@ -188,12 +190,13 @@ def test_bake_scales_with_the_scene(device, bunny_path, scale):
     np.testing.assert_allclose(c2[same] * scale**2, c1[same], rtol=2e-4, atol=1e-4 * np.abs(c1).max())
 
 
-def test_lodprt_bake_callable_after_module_import():
-    """``lodprt.bake(...)`` stays the bake function even after ``import lodprt.bake`` bound the module there."""
+def test_lodprt_bake_is_the_function_after_the_module_is_imported():
+    """``lodprt.bake(...)`` is the bake function whatever was imported first (the bake module lives in
+    ``lodprt.precompute``, so nothing rebinds the public name)."""
     import lodprt
-    import lodprt.bake as module
+    import lodprt.precompute.bake as module
 
-    assert lodprt.bake is module and callable(lodprt.bake)
+    assert lodprt.bake is module.bake and callable(lodprt.bake)
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
     scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
     with pytest.raises(LodprtError, match="threshold_deg"):
@@ -202,7 +205,7 @@ def test_lodprt_bake_callable_after_module_import():
 
 def test_ray_offset_is_a_python_float_far_from_the_origin():
     """A small scene far from the origin: the float32-resolution ray offset is a Python float (attributes are JSON)."""
-    from lodprt.bake import ray_offset
+    from lodprt.precompute.bake import ray_offset
 
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]]) * 1e-3 + 1e3
     scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
@@ -212,7 +215,7 @@ def test_ray_offset_is_a_python_float_far_from_the_origin():
 
 def test_non_finite_coefficients_stop_the_bake_naming_the_sample():
     """NaN or infinite coefficients (what the scene limits miss) raise a LodprtError naming scene and light sample."""
-    from lodprt.bake import _check_finite
+    from lodprt.precompute.bake import _check_finite
 
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
     scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")

@@ -9,7 +9,7 @@ pytest.importorskip("moderngl")
 @pytest.fixture(scope="module")
 def cut_store(bunny_floor, bunny_hierarchy, tmp_path_factory):
     """The bunny on a 40 x 40 floor, light cut at 5 degrees, with the hierarchy."""
-    from lodprt.bake import bake
+    from lodprt.precompute.bake import bake
 
     path = tmp_path_factory.mktemp("compare") / "cut.zarr"
     bake(bunny_floor, path, sh_order=4, device="cpu", tree=bunny_hierarchy, threshold_deg=5.0)
@@ -19,9 +19,9 @@ def cut_store(bunny_floor, bunny_hierarchy, tmp_path_factory):
 def test_compare_figure_numbers_and_error_bound(cut_store, tmp_path):
     """The figure is written; the LOD frame has fewer triangles than the full one, and a tighter error bound gives
     more triangles and a smaller difference."""
-    from lodprt.compare import compare_figure
-    from lodprt.runtime import Camera
-    from lodprt.store import open_store
+    from lodprt.display.compare import compare_figure
+    from lodprt.runtime.session import Camera
+    from lodprt.store.bake_store import open_store
 
     store = open_store(cut_store)
     cam = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), width=160, height=120)
@@ -35,7 +35,7 @@ def test_compare_figure_numbers_and_error_bound(cut_store, tmp_path):
 
 def test_cli_compare(cut_store, tmp_path, capsys):
     """`lodprt compare` prints triangle counts and PSNR and never replaces an existing figure without --overwrite."""
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     out = tmp_path / "fig.png"
     args = ["compare", str(cut_store), "--light", "0.05", "0.3", "0.1", "--eye", "0.05", "0.3", "0.45", "--size", "120",

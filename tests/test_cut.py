@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from lodprt.bake import _Baker, bake, load_kernels
-from lodprt.completion import RULE_T15, CompletionPlan, ring_weights
-from lodprt.cut import LightCut
-from lodprt.hierarchy import active_ancestors, build_hierarchy
+from lodprt.precompute.bake import _Baker, bake, load_kernels
+from lodprt.model.completion import RULE_T15, CompletionPlan, ring_weights
+from lodprt.precompute.light_cut import LightCut
+from lodprt.model.hierarchy import active_ancestors, build_hierarchy
 from lodprt.kernels.visibility import LIT
-from lodprt.scene import Material, _assemble, floor_mesh
+from lodprt.model.scene import Material, _assemble, floor_mesh
 
 
 def light_cut(scene, h, device, light, threshold):
@@ -74,7 +74,7 @@ def test_uniform_incidence_collapses_to_the_base(device):
 
 def test_cut_bake_coefficients_identical_to_full(tmp_path, device, bunny_floor, bunny_hierarchy):
     """Vertices the cut keeps carry bit-identical coefficients to the full bake; info reports per-sample counts."""
-    from lodprt.store import open_store
+    from lodprt.store.bake_store import open_store
 
     full = bake(bunny_floor, tmp_path / "full.zarr", sh_order=3, device=device, tree=bunny_hierarchy)
     cut = bake(bunny_floor, tmp_path / "cut.zarr", sh_order=3, device=device, tree=bunny_hierarchy, threshold_deg=5.0)
@@ -101,7 +101,7 @@ def test_cut_bake_coefficients_identical_to_full(tmp_path, device, bunny_floor, 
 
 def test_completion_of_constant_and_linear_fields(bunny_floor, bunny_hierarchy):
     """Equal neighbour coefficients complete to exactly those; on the flat floor a linear field is reproduced."""
-    from lodprt.hierarchy import Cut
+    from lodprt.model.hierarchy import Cut
 
     h = bunny_hierarchy
     plan = CompletionPlan(h, bunny_floor.positions, bunny_floor.normals)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from lodprt import environment as E
-from lodprt import sh
+from lodprt.model import environment as E
+from lodprt.model import sh
 from lodprt.errors import LodprtError
 
 

@@ -23,7 +23,7 @@ from hypothesis import HealthCheck, event, example, given, note, settings
 from hypothesis import strategies as st
 
 from lodprt.errors import LodprtError
-from lodprt.scene import COORDINATE_LIMIT, MAX_LIGHT_SAMPLES, Scene, load_scene
+from lodprt.model.scene import COORDINATE_LIMIT, MAX_LIGHT_SAMPLES, Scene, load_scene
 
 EXPLORE = os.environ.get("LODPRT_FUZZ") == "explore"
 
@@ -452,7 +452,7 @@ def tiny_bake_cases(draw):
 @pytest.fixture(scope="module")
 def cpu_kernels():
     """Warp's bake kernels compiled (or loaded from its cache) before the first example, outside its deadline."""
-    from lodprt.bake import load_kernels
+    from lodprt.precompute.bake import load_kernels
 
     load_kernels("cpu")
 

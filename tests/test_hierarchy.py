@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from lodprt.errors import LodprtError
-from lodprt.hierarchy import Cut, Hierarchy, active_ancestors, build_hierarchy, pymeshlab_levels
-from lodprt.scene import vertex_normals
+from lodprt.model.hierarchy import Cut, Hierarchy, active_ancestors, build_hierarchy, pymeshlab_levels
+from lodprt.model.scene import vertex_normals
 
 
 @pytest.fixture(scope="module")
@@ -279,7 +279,7 @@ def test_bad_input_is_refused():
 def test_batched_steps_stay_legal(scene, hier):
     """refine_many / force_refine_many / coarsen_many from the base cut: the asked-for nodes get split, every
     batch leaves a legal cut (dependency invariant, a valid front), and coarsening everything returns to the base."""
-    from lodprt.hierarchy import dependency_violations
+    from lodprt.model.hierarchy import dependency_violations
 
     h = hier
     cut = Cut.base(h, scene.faces)

@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from lodprt import environment as E
-from lodprt import irradiance as I
-from lodprt import sh
+from lodprt.model import environment as E
+from lodprt.model import irradiance as I
+from lodprt.model import sh
 from lodprt.errors import LodprtError
 
 
@@ -113,7 +113,7 @@ def test_render_irradiance_centre_pixel():
 
 def test_irradiance_cli_json(capsys):
     """`lodprt irradiance sky:16 --json` prints the 9 RGB coefficients, A_l, c1..c5, the matrices and the registers."""
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     assert main(["irradiance", "sky:16", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -125,7 +125,7 @@ def test_irradiance_cli_json(capsys):
 
 def test_irradiance_cli_text_and_error(capsys, tmp_path):
     """The text form prints the table; a bad file gives exit code 2 and one line naming it."""
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     assert main(["irradiance", "spots:8"]) == 0
     out = capsys.readouterr().out
@@ -137,7 +137,7 @@ def test_irradiance_cli_text_and_error(capsys, tmp_path):
 
 def test_ringing_of_a_directional_light_is_reported(capsys, tmp_path):
     """A directional light's 9-coefficient irradiance dips to -3.7% of its maximum; the range and the CLI report it."""
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     d = E.texel_directions("latlong", 64)
     spot = np.exp((d @ [0.0, 1.0, 0.0] - 1) / 0.0005)

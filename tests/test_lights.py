@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lodprt.errors import LodprtError
-from lodprt.lights import LightInterpolator
+from lodprt.runtime.lights import LightInterpolator
 
 
 def grid(nx=4, ny=2, nz=3):
@@ -80,7 +80,7 @@ def test_outside_is_clamped_with_warning_or_refused(caplog):
     """A light outside the box is clamped to it (warned), or refused with outside='error'; on the boundary is in."""
     s, box = grid()
     li = LightInterpolator(s, box)
-    with caplog.at_level(logging.WARNING, logger="lodprt.lights"):
+    with caplog.at_level(logging.WARNING, logger="lodprt.runtime.lights"):
         idx, w, moved = li.weights([[2.0, 0.5, 0.5], [1.0, 0.0, 0.5]])
     assert moved.tolist() == [True, False]
     assert "outside the sampled region" in caplog.text

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from lodprt import sh
+from lodprt.model import sh
 from lodprt.errors import LodprtError
-from lodprt.hierarchy import active_ancestors, dependency_violations
-from lodprt.runtime import Camera, Runtime, clip_planes, view_projection
-from lodprt.store import open_store
+from lodprt.model.hierarchy import active_ancestors, dependency_violations
+from lodprt.runtime.session import Camera, Runtime, clip_planes, view_projection
+from lodprt.store.bake_store import open_store
 
 
 @pytest.fixture(scope="module")
@@ -212,7 +212,7 @@ def test_culling_is_conservative(store):
 def test_lumi_error_bounds_the_leaf_spread(store):
     """e_lumi is at least the true display spread (max - min of clip(L / white, 0, 1)) of the leaves' radiance toward
     the node's view direction, and it is 0 for a node whose leaves all read the same."""
-    from lodprt.runtime import display
+    from lodprt.runtime.session import display
 
     r = Runtime(store)
     r.set_camera(orbit_camera(r, 0.4))
@@ -280,7 +280,7 @@ def test_bad_settings_are_refused(store, rt):
 
 def test_cli_radiance_with_lights(store, bunny_bake, tmp_path, capsys):
     """`lodprt radiance --light` writes the interpolated, completed radiance; bad lights give one-line errors."""
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     x = 0.5 * (store.light_positions[0] + store.light_positions[4])
     out = tmp_path / "rad.npy"
@@ -304,7 +304,7 @@ def test_cli_frames_json(bunny_bake, capsys):
     """`lodprt frames --json` reports every frame with fewer triangles than the full mesh and a summary."""
     import json
 
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     assert main(["frames", str(bunny_bake), "--frames", "6", "--path", "dolly", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -316,8 +316,8 @@ def test_cli_frames_json(bunny_bake, capsys):
 
 def test_light_radiance_without_a_runtime(store, bunny_floor, tmp_path):
     """light_radiance equals Runtime.radiance, and works on a store baked without a hierarchy (full bake)."""
-    from lodprt.bake import bake
-    from lodprt.runtime import light_radiance
+    from lodprt.precompute.bake import bake
+    from lodprt.runtime.session import light_radiance
 
     x = [0.4 * store.light_positions[2] + 0.6 * store.light_positions[7]]
     r = Runtime(store, lod=False)

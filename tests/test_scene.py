@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lodprt.errors import SceneError
-from lodprt.scene import Lights, floor_mesh, load_mesh, load_scene, vertex_normals
+from lodprt.model.scene import Lights, floor_mesh, load_mesh, load_scene, vertex_normals
 
 QUAD_OBJ = """\
 v 0 0 0
@@ -211,7 +211,7 @@ def test_demo_scene_loads():
 
 def test_procedural_demo_fallback_builds():
     """Without pymeshlab's sample bunny the demo falls back to a torus over a slab: a valid, closed-ish mesh."""
-    from lodprt.scene import _procedural_mesh
+    from lodprt.model.scene import _procedural_mesh
 
     pos, faces = _procedural_mesh()
     assert np.isfinite(pos).all() and faces.max() < len(pos)
@@ -260,7 +260,7 @@ def test_tristrip_ply_read_with_file_vertex_order(tmp_path, caplog):
     """A PLY of triangle strips is read (via pymeshlab): every vertex in file order and count, the grid's area."""
     path = tmp_path / "strips.ply"
     ref, triangles = strip_grid_ply(path)
-    with caplog.at_level("INFO", logger="lodprt.meshio"):
+    with caplog.at_level("INFO", logger="lodprt.model.meshio"):
         scene = load_scene(path)
     assert "pymeshlab" in caplog.text
     assert scene.num_vertices == len(ref) == 902
@@ -356,7 +356,7 @@ def test_up_z_equals_prerotated_mesh_and_floor_lies_under_it(tmp_path):
 
 def test_up_axes_are_proper_rotations_to_y_and_rotate_order():
     """Every up axis maps to +y with det +1; rotate is about x, then y, then z (fixed axes, right-handed)."""
-    from lodprt.meshio import UP_AXES, rotation_matrix
+    from lodprt.model.meshio import UP_AXES, rotation_matrix
 
     for axis in UP_AXES:
         m = rotation_matrix(axis)

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.special import sph_harm_y
 
-from lodprt import sh
+from lodprt.model import sh
 from lodprt.kernels import sh as ksh
 
 # Bands 0..100.  scipy's sph_harm_y (recurrence-based since scipy 1.15) has not broken down there: the two

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lodprt import sh
-from lodprt.bake import _Baker, bake, load_kernels
+from lodprt.model import sh
+from lodprt.precompute.bake import _Baker, bake, load_kernels
 from lodprt.errors import StoreError
-from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
-from lodprt.store import open_store
+from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
+from lodprt.store.bake_store import open_store
 
 LIGHTS = {"grid": [2, 1, 2]}
 
@@ -49,7 +49,7 @@ def test_round_trip_exact(small, baked):
 
 def test_hierarchy_stored_and_reported(small, baked):
     """The bake stores the vertex hierarchy bit for bit and info reports its nodes, roots and build time."""
-    from lodprt.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy import build_hierarchy
 
     path, res = baked
     store = open_store(path)
@@ -116,7 +116,7 @@ def test_open_errors(tmp_path):
 
 
 def lodprt(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "lodprt.cli", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "lodprt.cli.main", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
 def test_cli_bake_info_radiance(tmp_path, bunny_path):

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from lodprt.errors import LodprtError
-from lodprt.scene import Material
+from lodprt.model.scene import Material
 
 pytestmark = pytest.mark.warp_debug
 
@@ -42,7 +42,7 @@ def variant(scene, kd, ks):
 @pytest.fixture(scope="module")
 def kinds(bunny_floor, bunny_hierarchy, tmp_path_factory):
     """name -> (scene, store path) for every kind in KINDS."""
-    from lodprt.bake import bake
+    from lodprt.precompute.bake import bake
 
     root = tmp_path_factory.mktemp("kinds")
     out = {}
@@ -64,9 +64,9 @@ def expected_width(kd, ks, order):
 def test_every_radiance_path_agrees(kinds, name):
     """For every store kind, the six radiance paths give the same (V, 3) radiance, channel by channel, and the
     store holds the coefficient width its material calls for."""
-    from lodprt.render import full_frame
-    from lodprt.runtime import Camera, Runtime, light_radiance
-    from lodprt.store import open_store
+    from lodprt.display.render import full_frame
+    from lodprt.runtime.session import Camera, Runtime, light_radiance
+    from lodprt.store.bake_store import open_store
 
     kd, ks, _, hier, order = KINDS[name]
     _, path = kinds[name]
@@ -105,7 +105,7 @@ def test_every_radiance_path_agrees(kinds, name):
 @pytest.mark.parametrize("name", ["grey-diffuse-cut", "rgb-diffuse-cut", "rgb-diffuse-full"])
 def test_diffuse_radiance_does_not_depend_on_the_eye(kinds, name):
     """A diffuse store's radiance is the same from two different eyes (T-7 with y_0 alone)."""
-    from lodprt.store import open_store
+    from lodprt.store.bake_store import open_store
 
     store = open_store(kinds[name][1])
     a, b = (store.radiance(2, eye) for eye in EYES)
@@ -115,9 +115,9 @@ def test_diffuse_radiance_does_not_depend_on_the_eye(kinds, name):
 def test_diffuse_full_store_equals_the_closed_form(kinds):
     """rgb-diffuse-full: every channel of every vertex is kd_c (N.L) I_c / max(d, radius)^2 where Embree sees the
     light, 0 where it does not (a handful of grazing rays may disagree between the two casters)."""
-    from lodprt.bake import ray_offset
-    from lodprt.reference import LIT, EmbreeCaster, visibility
-    from lodprt.store import open_store
+    from lodprt.precompute.bake import ray_offset
+    from lodprt.precompute.reference import LIT, EmbreeCaster, visibility
+    from lodprt.store.bake_store import open_store
 
     scene, path = kinds["rgb-diffuse-full"]
     store = open_store(path)
@@ -142,9 +142,9 @@ def test_diffuse_full_store_equals_the_closed_form(kinds):
 def test_runtime_kernels_on_every_order(bunny_floor, bunny_hierarchy, tmp_path, order):
     """SH orders 1..8 (grey, specular: order^2 coefficients; order 1 is y_0 alone): the view-cut frame's
     relit radiance equals the float64 reference per vertex and the kernel's errors equal the reference's."""
-    from lodprt.bake import bake
-    from lodprt.runtime import Runtime
-    from lodprt.store import open_store
+    from lodprt.precompute.bake import bake
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
 
     scene = variant(bunny_floor, GREY, 0.19)
     scene = dataclasses.replace(scene, lights=dataclasses.replace(scene.lights, grid=(2, 1, 2)))
@@ -167,8 +167,8 @@ def test_view_cut_relighting_on_every_kind(kinds, name):
     """The view-cut frame of a 1- or n^2-coefficient, 1- or 3-channel store: relit radiance equals the float64
     full-resolution reference at the active vertices, the kernel's e_lumi equals its float64 reference (which
     reads the boxes' own width), and the cut stays legal over a short orbit."""
-    from lodprt.runtime import Runtime
-    from lodprt.store import open_store
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
 
     rt = Runtime(open_store(kinds[name][1]), device="cpu", alpha=0.4)
     for a in np.linspace(0, 2 * np.pi, 5)[:-1]:
@@ -185,7 +185,7 @@ def test_view_cut_relighting_on_every_kind(kinds, name):
 
 
 def cli(*argv):
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     return main([str(a) for a in argv])
 
@@ -249,7 +249,7 @@ def test_huge_render_size_is_a_clear_error(kinds, tmp_path, capsys, gl):
 
 def test_camera_straight_down_picks_another_up(kinds, tmp_path, gl):
     """A camera looking straight down with up = +y renders (another up vector is chosen) instead of failing."""
-    from lodprt.render import look_at
+    from lodprt.display.render import look_at
 
     m = look_at((0, 2, 0), (0, 0, 0), (0, 1, 0))
     assert np.isfinite(m).all() and np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3))

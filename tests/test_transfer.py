@@ -4,12 +4,13 @@ the transfer store, and run-time relighting under a rotating environment."""
 import numpy as np
 import pytest
 
-from lodprt import environment as E
-from lodprt import irradiance as I
-from lodprt import relight, sh
-from lodprt import transfer as T
+from lodprt.model import environment as E
+from lodprt.model import irradiance as I
+from lodprt.model import sh
+from lodprt.runtime import environment_relight as relight
+from lodprt.precompute import transfer as T
 from lodprt.errors import LodprtError
-from lodprt.scene import Material, _assemble, vertex_normals
+from lodprt.model.scene import Material, _assemble, vertex_normals
 
 
 def icosphere(subdivisions=2, radius=1.0, centre=(0, 0, 0)):
@@ -319,7 +320,7 @@ def test_bake_store_and_relight(device, tmp_path):
 
 def test_cli_bake_and_render_environment(tmp_path, capsys, gl):
     """`lodprt bake-environment --lod-threshold` then `render-environment --rotate` write a store and PNG frames."""
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     mesh = tmp_path / "ball.obj"
     import trimesh
@@ -341,8 +342,8 @@ def test_cli_short_forms_bake_and_render_with_environment(tmp_path, capsys, gl):
     bake-environment / render-environment do (the same store, a PNG); point-light options are refused clearly."""
     import trimesh
 
-    from lodprt.cli import main
-    from lodprt.relight import open_transfer
+    from lodprt.cli.main import main
+    from lodprt.runtime.environment_relight import open_transfer
 
     mesh = tmp_path / "ball.obj"
     trimesh.creation.icosphere(subdivisions=1).export(mesh)
@@ -363,7 +364,7 @@ def test_cli_short_forms_bake_and_render_with_environment(tmp_path, capsys, gl):
 @pytest.fixture(scope="module")
 def ball_lod():
     """The ball on a 40 x 40 floor (1,762 vertices), its shadowed transfer (cpu) and its vertex hierarchy."""
-    from lodprt.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy import build_hierarchy
 
     scene = small_scene(floor=40)
     g = T.Geometry.from_scene(scene, device="cpu")

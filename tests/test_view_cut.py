@@ -21,9 +21,9 @@ def grid_plane(n: int, size: float) -> trimesh.Trimesh:
 
 def bake_scene(tmp_path, objects: dict, *, light, ks=0.0, shininess=2.0, falloff="none", order=4):
     """Bake a TOML scene of ``objects`` (name -> trimesh) with one light sample at ``light``: the store."""
-    from lodprt.bake import bake
-    from lodprt.scene import load_scene
-    from lodprt.store import open_store
+    from lodprt.precompute.bake import bake
+    from lodprt.model.scene import load_scene
+    from lodprt.store.bake_store import open_store
 
     lines = []
     for name, mesh in objects.items():
@@ -38,7 +38,7 @@ def bake_scene(tmp_path, objects: dict, *, light, ks=0.0, shininess=2.0, falloff
 
 def frames(store, camera, **options):
     """(view-cut frame, full-resolution frame, the Runtime) for the store's only light sample."""
-    from lodprt.runtime import Runtime
+    from lodprt.runtime.session import Runtime
 
     rt = Runtime(store, device="cpu", **options)
     rt.set_lights(store.light_positions[:1])
@@ -59,14 +59,14 @@ def box_shadow(tmp_path_factory):
 
 
 def top_camera(**kw):
-    from lodprt.runtime import Camera
+    from lodprt.runtime.session import Camera
 
     return Camera(eye=(0.0, 2.2, 0.8), target=(0.0, 0.0, 0.0), width=kw.get("width", 240), height=kw.get("height", 180))
 
 
 def box_pixels(cam) -> np.ndarray:
     """(H, W) bool: the screen rectangle around the floating box's projection (its corners), widened by 3 pixels."""
-    from lodprt.render import camera_matrices
+    from lodprt.display.render import camera_matrices
 
     corners = np.array([[x, y, z] for x in (-0.15, 0.15) for y in (0.35, 0.45) for z in (-0.15, 0.15)])
     view, proj = camera_matrices(cam, corners)
@@ -84,9 +84,9 @@ def test_hard_shadow_boundary_is_kept(box_shadow):
     smears it (its boundary error at least 4 times larger and over 0.1 of white: the check tells them apart)."""
     from scipy import ndimage
 
-    from lodprt.compare import frame_error
-    from lodprt.render import Renderer
-    from lodprt.runtime import DEFAULT_ERROR_BOUND
+    from lodprt.display.compare import frame_error
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.session import DEFAULT_ERROR_BOUND
 
     cam = top_camera()
     white = 2.5 * 0.6  # kd 0.6, no falloff, N.L about 1 on the lit plane
@@ -120,9 +120,9 @@ def test_plain_lit_plane_coarsens_to_its_base(tmp_path):
 def test_specular_highlight_on_a_plane_is_kept(tmp_path):
     """A tight highlight on a flat glossy plane (seen in the mirror direction) stays: the highlight's pixels are
     within the bound of full resolution and the frame within 35 dB, though the plane has no geometric error."""
-    from lodprt.compare import frame_error
-    from lodprt.render import Renderer
-    from lodprt.runtime import Camera, DEFAULT_ERROR_BOUND
+    from lodprt.display.compare import frame_error
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.session import Camera, DEFAULT_ERROR_BOUND
 
     store = bake_scene(tmp_path, {"plane": grid_plane(121, 2.0)}, light=(-0.4, 0.8, 0.0), ks=0.8, shininess=40.0,
                        falloff="inverse-square", order=6)

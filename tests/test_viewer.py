@@ -10,8 +10,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lodprt.runtime import Camera
-from lodprt.viewer import Slider, Viewer, ViewerState, slider_layout
+from lodprt.runtime.session import Camera
+from lodprt.display.viewer import Slider, Viewer, ViewerState, slider_layout
 
 
 def state():
@@ -193,7 +193,7 @@ def test_window_drags_off_the_sliders_orbit_pan_and_move_lights():
 @pytest.fixture(scope="module")
 def cut_store(bunny_floor, bunny_hierarchy, tmp_path_factory):
     """The bunny on a 40 x 40 floor, light cut at 5 degrees, with the hierarchy."""
-    from lodprt.bake import bake
+    from lodprt.precompute.bake import bake
 
     path = tmp_path_factory.mktemp("viewer") / "cut.zarr"
     bake(bunny_floor, path, sh_order=4, device="cpu", tree=bunny_hierarchy, threshold_deg=5.0)
@@ -202,7 +202,7 @@ def cut_store(bunny_floor, bunny_hierarchy, tmp_path_factory):
 
 def test_no_display_is_a_one_line_error(cut_store, monkeypatch, capsys):
     """Without DISPLAY `lodprt view` says what is missing in one line and exits with code 2."""
-    from lodprt.cli import main
+    from lodprt.cli.main import main
 
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
@@ -236,7 +236,7 @@ def test_viewer_starts_draws_and_closes_under_xvfb(cut_store, xvfb, tmp_path):
 
     shot = tmp_path / "shot.png"
     env = dict(os.environ, DISPLAY=xvfb)
-    res = subprocess.run([sys.executable, "-m", "lodprt.cli", "view", str(cut_store), "--light", "0.05", "0.3", "0.1",
+    res = subprocess.run([sys.executable, "-m", "lodprt.cli.main", "view", str(cut_store), "--light", "0.05", "0.3", "0.1",
                           "--size", "240", "180", "--frames", "3", "--screenshot", str(shot)],
                          env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from lodprt import reference
-from lodprt.bake import _Baker, load_kernels, ray_offset
+from lodprt.precompute import reference
+from lodprt.precompute.bake import _Baker, load_kernels, ray_offset
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
-from lodprt.scene import THESIS_MATERIAL, _assemble, load_mesh
+from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
 
 embreex = pytest.importorskip("embreex")
 

@@ -1,7 +1,7 @@
 """The environment-lighting commands of ``lodprt``: irradiance, bake-environment, render-environment.
 
-``lodprt.cli`` registers them with :func:`add_parsers` and dispatches through :data:`COMMANDS`; the work is done
-in :mod:`lodprt.environment`, :mod:`lodprt.irradiance`, :mod:`lodprt.transfer` and :mod:`lodprt.relight`.
+``lodprt.cli.main`` registers them with :func:`add_parsers` and dispatches through :data:`COMMANDS`; the work is done
+in :mod:`lodprt.model.environment`, :mod:`lodprt.model.irradiance`, :mod:`lodprt.precompute.transfer` and :mod:`lodprt.runtime.environment_relight`.
 """
 
 from __future__ import annotations
@@ -78,8 +78,8 @@ def add_parsers(sub) -> None:
 
 
 def _cmd_irradiance(args) -> int:
-    from lodprt import irradiance as irr
-    from lodprt.environment import load_environment
+    from lodprt.model import irradiance as irr
+    from lodprt.model.environment import load_environment
 
     env = load_environment(args.environment)
     if args.mip:
@@ -115,9 +115,9 @@ def _cmd_bake_environment(args) -> int:
     from tqdm import tqdm
 
     from lodprt.devices import resolve_device
-    from lodprt.environment import load_environment
-    from lodprt.scene import load_scene
-    from lodprt.transfer import bake_transfer
+    from lodprt.model.environment import load_environment
+    from lodprt.model.scene import load_scene
+    from lodprt.precompute.transfer import bake_transfer
 
     if args.jobs is not None and args.jobs < 1:
         raise LodprtError(f"--jobs {args.jobs}: must be >= 1")
@@ -155,8 +155,8 @@ def _cmd_bake_environment(args) -> int:
 def _cmd_render_environment(args) -> int:
     import numpy as np
 
-    from lodprt.environment import load_environment
-    from lodprt.relight import open_transfer, render_relit, rotated_lighting, save_png
+    from lodprt.model.environment import load_environment
+    from lodprt.runtime.environment_relight import open_transfer, render_relit, rotated_lighting, save_png
 
     out = Path(args.out)
     if out.suffix.lower() != ".png":

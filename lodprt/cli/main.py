@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt import environment_cli
+from lodprt.cli import environment as environment_cli
 from lodprt.errors import LodprtError
 
 EPILOG_BAKE = """\
@@ -71,8 +71,8 @@ def _view_args(p: argparse.ArgumentParser, output: str | None, *, required: bool
 
 def _view_setup(args, store):
     """(lights, colors, Camera) from the display arguments."""
-    from lodprt.render import default_eye, scene_centre
-    from lodprt.runtime import Camera
+    from lodprt.display.render import default_eye, scene_centre
+    from lodprt.runtime.session import Camera
 
     lights = args.light if args.light else [store.light_positions[store.num_samples // 2].tolist()]
     colors = args.color
@@ -233,8 +233,8 @@ def _delegate(command: str, argv: list[str]) -> int:
 
 
 def _cmd_render(args) -> int:
-    from lodprt.render import render_to_file
-    from lodprt.store import open_store
+    from lodprt.display.render import render_to_file
+    from lodprt.store.bake_store import open_store
 
     if args.environment is not None:  # a transfer store relit by an environment: render-environment
         if args.light:
@@ -259,8 +259,8 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_compare(args) -> int:
-    from lodprt.compare import compare_figure
-    from lodprt.store import open_store
+    from lodprt.display.compare import compare_figure
+    from lodprt.store.bake_store import open_store
 
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
@@ -276,8 +276,8 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_turntable(args) -> int:
-    from lodprt.render import turntable
-    from lodprt.store import open_store
+    from lodprt.display.render import turntable
+    from lodprt.store.bake_store import open_store
 
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
@@ -290,11 +290,11 @@ def _cmd_turntable(args) -> int:
 
 
 def _cmd_view(args) -> int:
-    from lodprt.store import open_store
-    from lodprt.viewer import run_viewer
+    from lodprt.store.bake_store import open_store
+    from lodprt.display.viewer import run_viewer
 
     if args.screenshot is not None:
-        from lodprt.render import check_output
+        from lodprt.display.render import check_output
 
         check_output(args.screenshot, (".png",), overwrite=True)
     store = open_store(args.store)
@@ -307,8 +307,8 @@ def _cmd_view(args) -> int:
 
 def _cmd_diff(args) -> int:
     from lodprt.devices import resolve_device
-    from lodprt.diff import diff_figure
-    from lodprt.store import open_store
+    from lodprt.display.diff import diff_figure
+    from lodprt.store.bake_store import open_store
 
     out = Path(args.out)
     if out.suffix.lower() != ".png":
@@ -338,8 +338,8 @@ def _cmd_bake(args) -> int:
         return _delegate("bake-environment", argv)
     from tqdm import tqdm
 
-    from lodprt.bake import bake
-    from lodprt.scene import load_scene
+    from lodprt.precompute.bake import bake
+    from lodprt.model.scene import load_scene
 
     if args.jobs is not None and args.jobs < 1:
         raise LodprtError(f"--jobs {args.jobs}: must be >= 1")
@@ -391,7 +391,7 @@ def _cmd_bake(args) -> int:
 
 
 def _cmd_info(args) -> int:
-    from lodprt.store import open_store
+    from lodprt.store.bake_store import open_store
 
     info = open_store(args.store).info()
     if args.json:
@@ -416,7 +416,7 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_radiance(args) -> int:
-    from lodprt.store import open_store
+    from lodprt.store.bake_store import open_store
 
     out = Path(args.out)
     if out.suffix != ".npy":
@@ -431,7 +431,7 @@ def _cmd_radiance(args) -> int:
     else:
         if args.color is not None and len(args.color) != len(args.light):
             raise LodprtError(f"--color: {len(args.color)} given for {len(args.light)} --light; give one per light or none")
-        from lodprt.runtime import light_radiance
+        from lodprt.runtime.session import light_radiance
 
         rad = light_radiance(store, args.light, args.eye, colors=args.color, outside=args.outside)
     np.save(out, rad)
@@ -440,19 +440,21 @@ def _cmd_radiance(args) -> int:
 
 
 def _runtime(store, **options):
-    """``store.runtime(**options)`` with a progress bar on stderr while the light samples are completed."""
+    """``Runtime(store, **options)`` with a progress bar on stderr while the light samples are completed."""
     from tqdm import tqdm
+
+    from lodprt.runtime.session import Runtime
 
     bar = tqdm(total=store.num_samples, unit="sample", desc="completing light samples", file=sys.stderr, leave=False)
     try:
-        return store.runtime(progress=lambda done, total: bar.update(done - bar.n), **options)
+        return Runtime(store, progress=lambda done, total: bar.update(done - bar.n), **options)
     finally:
         bar.close()
 
 
 def _cmd_frames(args) -> int:
-    from lodprt.runtime import camera_path
-    from lodprt.store import open_store
+    from lodprt.runtime.session import camera_path
+    from lodprt.store.bake_store import open_store
 
     if args.frames < 1:
         raise LodprtError(f"--frames {args.frames}: must be >= 1")
@@ -492,14 +494,14 @@ class _FrameErrors:
     """The image error of run-time frames against the full mesh under the same camera and lights."""
 
     def __init__(self, store, rt):
-        from lodprt.render import Renderer
+        from lodprt.display.render import Renderer
 
         self.store, self.rt = store, rt
         self.renderer = Renderer()
 
     def measure(self, frame) -> dict:
-        from lodprt.compare import frame_error
-        from lodprt.render import full_frame
+        from lodprt.display.compare import frame_error
+        from lodprt.display.render import full_frame
 
         full = full_frame(self.store, frame.camera, lights=frame.lights, colors=frame.light_colors)
         numbers, _, _ = frame_error(self.renderer, frame, full, self.rt.white)

@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt import sh
+from lodprt.model import sh
 from lodprt.errors import LodprtError
 
 #: file names of the six faces of a cube map given as a folder, in face order

@@ -1,7 +1,7 @@
 """Irradiance environment maps with 9 SH coefficients (Ramamoorthi & Hanrahan 2001; seed 002, I-4..I-7).
 
 With ``L_lm`` the order-3 (l <= 2) SH coefficients of the environment's radiance (lodprt's convention,
-``lodprt.sh``: y_1 = sqrt(3/4pi) (y, z, x), no Condon-Shortley phase), the irradiance at unit normal ``n`` is
+``lodprt.model.sh``: y_1 = sqrt(3/4pi) (y, z, x), no Condon-Shortley phase), the irradiance at unit normal ``n`` is
 
     E(n) = sum_{l<=2} A_l L_lm y_lm(n),      A_0 = pi, A_1 = 2 pi/3, A_2 = pi/4                      (I-6)
 
@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt import sh
+from lodprt.model import sh
 from lodprt.errors import LodprtError
 
 #: A_l of I-6, l = 0, 1, 2
@@ -255,7 +255,7 @@ def irradiance_gl(normals, coeffs) -> np.ndarray:
     n = _normals(normals).reshape(-1, 3).astype(np.float32)
     if len(n) == 0:
         return np.zeros((0, 3), np.float32)
-    from lodprt.render import create_context
+    from lodprt.display.render import create_context
 
     width = min(len(n), 1024)
     height = -(-len(n) // width)
@@ -314,7 +314,7 @@ def render_irradiance(positions, triangles, normals, coeffs, *, albedo=(0.8, 0.8
     ``exposure``, clipped to [0, 1] and sRGB-encoded in the fragment shader. Returns (H, W, 3) uint8, first row
     on top; camera as in :func:`lodprt.render.render`.
     """
-    from lodprt.render import check_size, create_context, draw_mesh, fit_mvp
+    from lodprt.display.render import check_size, create_context, draw_mesh, fit_mvp
 
     size = check_size(size)
     pos = np.asarray(positions, np.float32)

@@ -382,7 +382,7 @@ class Store:
 
     def completion_plan(self):
         """The geometry-only completion weights of this store's hierarchy (computed once, then cached)."""
-        from lodprt.completion import CompletionPlan
+        from lodprt.model.completion import CompletionPlan
 
         if "completion" not in self._cache:
             self._cache["completion"] = CompletionPlan(self.hierarchy(), self.positions, self.normals)
@@ -394,7 +394,7 @@ class Store:
 
     def coefficients(self, sample: int) -> np.ndarray:
         """(V, C, ncoef) float64 coefficients of every vertex for ``sample``: stored where the light cut kept the
-        vertex, completed from its pre-collapse neighbours elsewhere (T-15, ``lodprt.completion``); 0 for vertices
+        vertex, completed from its pre-collapse neighbours elsewhere (T-15, ``lodprt.model.completion``); 0 for vertices
         no face uses. Completed samples are cached on this Store object."""
         key = f"completed/{sample}"
         if key not in self._cache:
@@ -419,12 +419,6 @@ class Store:
             out[ids] = coeffs
         return out
 
-    def runtime(self, **options):
-        """A ``lodprt.runtime.Runtime`` over this store (moving lights, view-dependent cut); options as there."""
-        from lodprt.runtime import Runtime
-
-        return Runtime(self, **options)
-
     def radiance(self, sample: int, eye) -> np.ndarray:
         """Radiance toward ``eye`` of every vertex, (V, 3) float32, from the SH coefficients of ``sample`` (T-7),
         completed where the light cut did not keep a vertex.
@@ -435,7 +429,7 @@ class Store:
 
     def scene(self):
         """The baked scene rebuilt from the store (positions, normals and faces exactly as baked)."""
-        from lodprt.scene import Lights, Material, Scene
+        from lodprt.model.scene import Lights, Material, Scene
 
         kd, ks, n = self.read("materials/kd"), self.read("materials/ks"), self.read("materials/shininess")
         a = dict(self.root["lights"].attrs)
@@ -460,7 +454,7 @@ class Store:
 
     def hierarchy(self):
         """The stored vertex hierarchy (``lodprt.hierarchy.Hierarchy``); StoreError when the bake made none."""
-        from lodprt.hierarchy import Hierarchy
+        from lodprt.model.hierarchy import Hierarchy
 
         if not self.has_hierarchy:
             raise StoreError(f"{self.path}: no hierarchy/ group (baked with --no-hierarchy)")
@@ -521,7 +515,7 @@ def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:
 
     coeffs (V, C, ncoef) with C = 1 (grey, used for R, G and B) or 3.
     """
-    from lodprt import sh
+    from lodprt.model import sh
 
     eye = np.asarray(eye, dtype=np.float64)
     if eye.shape != (3,) or not np.isfinite(eye).all():
@@ -539,7 +533,3 @@ def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:
 def open_store(path: str | os.PathLike) -> Store:
     """Open a bake store for reading; raises StoreError naming the path when it is not one."""
     return Store(path)
-
-
-#: ``lodprt.open(path)``: the same as ``open_store``
-open = open_store  # noqa: A001

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.render import Renderer, auto_white, check_output, frame_source
+from lodprt.display.render import Renderer, auto_white, check_output, frame_source
 
 
 def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
@@ -58,7 +58,10 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
         ax.axis("off")
     sm = matplotlib.cm.ScalarMappable(norm=matplotlib.colors.Normalize(0, vmax), cmap=cmap)
     fig.colorbar(sm, ax=axes[2], fraction=0.046, pad=0.02).set_label("difference / white", fontsize=8)
-    what = f"{criterion} criterion, error bound {error_bound:g}" + (f", alpha {alpha:g}" if criterion == "thesis" else "")
+    if error_bound is None:  # a store without a hierarchy: no view cut, both panels are full resolution
+        what = "no hierarchy (full resolution both)"
+    else:
+        what = f"{criterion} criterion, error bound {error_bound:g}" + (f", alpha {alpha:g}" if criterion == "thesis" else "")
     fig.suptitle(f"{what}: PSNR {psnr:.1f} dB (clipped at white), relative "
                  f"RMSE {rmse:.4f}, mean |diff| {float(diff.mean()) if diff.size else 0.0:.4f} of white", fontsize=10)
     fig.savefig(out, bbox_inches="tight", pad_inches=0.1)

@@ -167,8 +167,8 @@ _MAX_ORDER = 8  # SH bands the shader evaluates (GLSL code is generated per orde
 
 
 def _sh_glsl(order: int) -> str:
-    """GLSL ``void sh_basis(vec3 d, out float y[N])``: the real SH basis of lodprt.sh (T-5, no Condon-Shortley
-    phase), unrolled for ``order`` bands with float64-computed constants (Q recurrence of the lodprt.sh docstring)."""
+    """GLSL ``void sh_basis(vec3 d, out float y[N])``: the real SH basis of lodprt.model.sh (T-5, no Condon-Shortley
+    phase), unrolled for ``order`` bands with float64-computed constants (Q recurrence of the lodprt.model.sh docstring)."""
     n = order * order
 
     def g(v) -> str:  # a GLSL float literal with every digit a float32 can use
@@ -591,8 +591,8 @@ def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = 
     T-12 weights, clamped into the sampled region). ``colors`` (L, 3) RGB
     intensities (default the store's); the frame's coefficients carry them (linear radiance).
     """
-    from lodprt.runtime import Frame, light_coefficients
-    from lodprt.store import radiance_toward
+    from lodprt.runtime.session import Frame, light_coefficients
+    from lodprt.store.bake_store import radiance_toward
 
     faces = store.faces
     ids = np.unique(faces.ravel()).astype(np.int32)
@@ -658,8 +658,10 @@ def frame_source(store, *, error_bound: float | None = None, alpha: float = 0.6,
                  criterion: str = "screen"):
     """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut; ``lod``
     False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution)."""
-    if store.has_hierarchy and hasattr(store, "runtime"):
-        return store.runtime(error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
+    if store.has_hierarchy:
+        from lodprt.runtime.session import Runtime
+
+        return Runtime(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
     if lod:
         log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
     return StoreFrames(store)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.hierarchy import Hierarchy
+from lodprt.model.hierarchy import Hierarchy
 
 RULE_T15, RULE_MEAN_VALUE, RULE_SHEPARD = 0, 1, 2
 #: rows of rings weighed at once (memory is CHUNK x the chunk's largest ring)
@@ -167,7 +167,7 @@ class CompletionPlan:
         have[ids] = True
         dark_v = np.zeros(num_vertices, bool)
         if cut_nodes is not None:
-            from lodprt.hierarchy import active_ancestors
+            from lodprt.model.hierarchy import active_ancestors
 
             active = np.zeros(self.h.num_nodes, bool)
             active[cut_nodes] = True

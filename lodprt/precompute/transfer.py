@@ -14,10 +14,10 @@ vertices and channels) falls below ``threshold`` times the direct pass' energy, 
 Glossy transfer (P-11, P-12): per vertex a matrix ``M_ij = integral V(s) H(n.s) y_i(s) y_j(s) ds`` (rows: order of
 the transferred radiance, columns: order of the source lighting) maps lighting to transferred incident radiance;
 at run time it is convolved with the Phong lobe of the material and evaluated in the reflection direction
-(:mod:`lodprt.relight`).
+(:mod:`lodprt.runtime.environment_relight`).
 
 Units: the transfer includes ``kd / pi`` (a Lambertian of albedo ``kd``; an irradiance map gives ``kd E / pi``,
-:mod:`lodprt.irradiance`). The glossy term is ``ks integral L(u) max(R.u, 0)^n du`` (the thesis' Phong lobe,
+:mod:`lodprt.model.irradiance`). The glossy term is ``ks integral L(u) max(R.u, 0)^n du`` (the thesis' Phong lobe,
 unnormalised). Lighting and transfer are in the world frame (y up).
 """
 
@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt import sh
+from lodprt.model import sh
 from lodprt.devices import resolve_device, warp
 from lodprt.errors import LodprtError, StoreError
-from lodprt.store import StoreWriter, prepare_destination, store_format
+from lodprt.store.bake_store import StoreWriter, prepare_destination, store_format
 
 log = logging.getLogger(__name__)
 
@@ -339,7 +339,7 @@ def transfer_cut(h, transfer, threshold: float, *, floor_fraction: float = 0.05)
     scale rather than never). The leaf spread is bounded conservatively by the per-coefficient box of the leaves'
     vectors, built bottom-up a height level at a time. ``threshold`` 0 collapses only identical vectors.
     """
-    from lodprt.hierarchy import node_heights
+    from lodprt.model.hierarchy import node_heights
 
     if not np.isfinite(threshold) or threshold < 0:
         raise LodprtError(f"lod threshold {threshold!r}: must be finite and >= 0")
@@ -368,9 +368,9 @@ def transfer_cut(h, transfer, threshold: float, *, floor_fraction: float = 0.05)
 
 
 def complete_transfer(h, positions, normals, cut_nodes, coefficients) -> np.ndarray:
-    """Transfer vectors of every vertex from those of a cut's vertices (T-15 completion, ``lodprt.completion``):
+    """Transfer vectors of every vertex from those of a cut's vertices (T-15 completion, ``lodprt.model.completion``):
     cut_nodes (K,), coefficients (K, ...) at ``h.vertex[cut_nodes]`` -> (V, ...) float64."""
-    from lodprt.completion import CompletionPlan
+    from lodprt.model.completion import CompletionPlan
 
     cut_nodes = np.asarray(cut_nodes)
     plan = CompletionPlan(h, positions, normals)
@@ -430,7 +430,7 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     if lod_threshold is not None:
         t_h = time.perf_counter()
         if tree is None:
-            from lodprt.hierarchy import build_hierarchy
+            from lodprt.model.hierarchy import build_hierarchy
 
             tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
         hierarchy_seconds = time.perf_counter() - t_h
@@ -544,7 +544,7 @@ class TransferStore:
         if not hasattr(self, "_diffuse"):
             t = self.read("transfer/diffuse")
             if self.has("transfer/cut_nodes"):
-                from lodprt.hierarchy import Hierarchy
+                from lodprt.model.hierarchy import Hierarchy
 
                 arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS if self.has(f"hierarchy/{name}")}
                 tree = Hierarchy.from_arrays(arrays)

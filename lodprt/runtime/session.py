@@ -8,7 +8,7 @@ and choose a view-dependent cut of the vertex hierarchy every frame.
 
 What a frame does (docs/RUNTIME.md has the full story):
 
-1. **Lights** (T-12, ``lodprt.lights``): every light's weights over the light samples; the per-sample RGB factors
+1. **Lights** (T-12, ``lodprt.runtime.lights``): every light's weights over the light samples; the per-sample RGB factors
    ``W[j, c] = sum_l I_lc w_lj`` (several lights add, thesis 3.4.1).
 2. **View cut** (T-13, T-14; seed 003 section 5): the cut of the vertex hierarchy is kept from frame to frame and
    only moved. Refine-Candidates are the active internal nodes, Coarsen-Candidates the nodes whose two children
@@ -46,10 +46,10 @@ import typing
 
 import numpy as np
 
-from lodprt import sh
+from lodprt.model import sh
 from lodprt.errors import LodprtError
-from lodprt.hierarchy import Cut, concat_ranges, map_faces
-from lodprt.lights import LightInterpolator
+from lodprt.model.hierarchy import Cut, concat_ranges, map_faces
+from lodprt.runtime.lights import LightInterpolator
 
 log = logging.getLogger(__name__)
 
@@ -166,7 +166,7 @@ def _as_camera(camera=None, **kw) -> Camera:
 def view_projection(camera: Camera, bounds: np.ndarray) -> np.ndarray:
     """4x4 projection @ view of ``camera`` (OpenGL clip space), with the renderer's near and far planes
     (``lodprt.render.camera_matrices``) for the scene's bounds (2, 3): the cut culls with the planes that draw."""
-    from lodprt.render import camera_matrices
+    from lodprt.display.render import camera_matrices
 
     corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
     view, proj = camera_matrices(camera, corners)
@@ -184,7 +184,7 @@ class Runtime:
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
-    (``lodprt.lights``); max_passes: refinement passes per frame after the first; lod=False: the full mesh;
+    (``lodprt.runtime.lights``); max_passes: refinement passes per frame after the first; lod=False: the full mesh;
     device: the Warp device of the per-frame kernels (default: CUDA when present, else the CPU);
     progress(done, total): called as the light samples are completed.
     """
@@ -298,7 +298,7 @@ class Runtime:
         (N - V, S, C, ncoef) float16. (a) is zero where the completed field is linear (T-15 has linear precision);
         (b) is one edge's step, small on smooth fields and large at a shadow or highlight boundary that runs next
         to the subtree (between two subtrees, where neither's own collapses see it)."""
-        from lodprt.completion import CHUNK
+        from lodprt.model.completion import CHUNK
 
         h = self.h
         V, N = h.num_vertices, h.num_nodes
@@ -337,7 +337,7 @@ class Runtime:
 
     def _levels(self) -> list[np.ndarray]:
         """Internal nodes grouped by height (children always on lower levels), lowest first."""
-        from lodprt.hierarchy import node_heights
+        from lodprt.model.hierarchy import node_heights
 
         if getattr(self, "_levels_cache", None) is None:
             hk = node_heights(self.h)
@@ -745,13 +745,13 @@ class Runtime:
     def radiance(self, eye) -> np.ndarray:
         """(V, 3) float32 radiance toward ``eye`` of every vertex under the current lights (full resolution,
         completed, interpolated); vertices no face uses read 0."""
-        from lodprt.store import radiance_toward
+        from lodprt.store.bake_store import radiance_toward
 
         return radiance_toward(self.positions, self.normals, self.coefficients(), eye, np.ones(3))
 
     def check(self) -> None:
         """Raise LodprtError unless the current cut is legal (``hierarchy.dependency_violations``)."""
-        from lodprt.hierarchy import dependency_violations
+        from lodprt.model.hierarchy import dependency_violations
 
         bad = dependency_violations(self.h, self.faces, self.cut.anc)
         if len(bad):
@@ -785,7 +785,7 @@ def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", 
 def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp") -> np.ndarray:
     """(V, 3) float32 radiance toward ``eye`` of every vertex of ``store`` under point lights (``light_coefficients``;
     ``Runtime.radiance`` gives the same numbers)."""
-    from lodprt.store import radiance_toward
+    from lodprt.store.bake_store import radiance_toward
 
     _, _, coeffs = light_coefficients(store, lights, colors=colors, weighting=weighting, outside=outside)
     return radiance_toward(store.positions, store.normals, coeffs, eye, np.ones(3))

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.store import Store, radiance_toward
+from lodprt.store.bake_store import Store, radiance_toward
 
 
 def full_resolution_radiance(store: Store, sample: int, eye, device: str) -> np.ndarray:
     """Re-bake ``sample`` at full resolution from the stored scene (same float32 arrays as the bake): (V, 3)."""
-    from lodprt.bake import _Baker, load_kernels
+    from lodprt.precompute.bake import _Baker, load_kernels
 
     scene = store.scene()
     load_kernels(device)
@@ -30,7 +30,7 @@ def diff_figure(store: Store, sample: int, eye, out_png, *, target=None, size=(6
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from lodprt.render import render, tone_map
+    from lodprt.display.render import render, tone_map
 
     eye = np.asarray(eye, np.float64)
     positions = store.positions

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt import sh
-from lodprt.environment import rotate_lighting, rotation_about_y
+from lodprt.model import sh
+from lodprt.model.environment import rotate_lighting, rotation_about_y
 from lodprt.errors import LodprtError
 
 
@@ -59,7 +59,7 @@ def glossy_radiance(matrices, positions, normals, ks, shininess, lighting, eye) 
 
 
 def open_transfer(path):
-    from lodprt.transfer import TransferStore
+    from lodprt.precompute.transfer import TransferStore
 
     return TransferStore(path)
 
@@ -87,7 +87,7 @@ def render_relit(store, lighting, *, eye, target=None, up=(0.0, 1.0, 0.0), fov: 
     Per-vertex radiance, tone-mapped with :func:`lodprt.render.tone_map` (``white`` = radiance shown as white,
     default the 99th percentile), drawn with :func:`lodprt.render.render` (offscreen EGL).
     """
-    from lodprt.render import render, tone_map
+    from lodprt.display.render import render, tone_map
 
     pos = store.read("scene/positions")
     faces = store.read("scene/faces")

@@ -6,7 +6,7 @@ A scene is given as one of
   * a TOML scene file (``*.toml``, format in ``docs/SCENE.md``);
   * a bare mesh path (OBJ, PLY, STL, OFF, GLB/GLTF): that mesh with the thesis material, no floor, default lights.
 
-Meshes are read by ``lodprt.meshio`` keeping the file's vertex order: store vertex ``i`` of an object is vertex
+Meshes are read by ``lodprt.model.meshio`` keeping the file's vertex order: store vertex ``i`` of an object is vertex
 ``i`` of its file. Objects are concatenated in file order, the floor last. Coordinates are y-up; an object's
 ``up`` key turns a z-up (or x-up) file upright.
 """
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import SceneError
-from lodprt.meshio import COORDINATE_LIMIT, UP_AXES, load_mesh, require_file  # noqa: F401  (load_mesh is public)
+from lodprt.model.meshio import COORDINATE_LIMIT, UP_AXES, load_mesh, require_file  # noqa: F401  (load_mesh is public)
 
 log = logging.getLogger(__name__)
 

@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 from lodprt.errors import LodprtError
-from lodprt.render import Renderer, _rotate_about, auto_white, frame_source
+from lodprt.display.render import Renderer, _rotate_about, auto_white, frame_source
 
 log = logging.getLogger(__name__)
 
@@ -320,7 +320,7 @@ class Viewer:
         from moderngl_window.conf import settings
 
         if error_bound is None:
-            from lodprt.runtime import DEFAULT_ERROR_BOUND
+            from lodprt.runtime.session import DEFAULT_ERROR_BOUND
 
             error_bound = DEFAULT_ERROR_BOUND.get(criterion, 0.25)
         self.state = ViewerState(camera=camera, lights=np.asarray(lights, np.float64).reshape(-1, 3).copy(),

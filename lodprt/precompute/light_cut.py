@@ -1,9 +1,9 @@
 """Light-dependent cut (SPEC 4; thesis 3.3, figure 8, eq. 11): per light sample, the front of the vertex hierarchy
 that the bottom-up ``qreduce`` pass keeps. Only the cut's vertices get SH coefficients; the rest are completed at
-read time (``lodprt.completion``).
+read time (``lodprt.model.completion``).
 
 The pass runs level-synchronously on the device: nodes are grouped by height (leaves 0, a parent one above its
-higher child), and one launch of ``kernels.cut.qreduce_level`` per height decides every node of that height at
+higher child), and one launch of ``kernels.light_cut.qreduce_level`` per height decides every node of that height at
 once. Children of a node always have smaller heights, so a single sweep from the leaves up is the fixed point.
 """
 
@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from lodprt.devices import warp
-from lodprt.hierarchy import Hierarchy, node_heights
+from lodprt.model.hierarchy import Hierarchy, node_heights
 
 
 class LightCut:
@@ -43,7 +43,7 @@ class LightCut:
     def cut(self, normals, visible, light: np.ndarray, threshold_deg: float) -> tuple[np.ndarray, np.ndarray]:
         """The light cut for ``light``: (active (N,) bool, dark (N,) bool: every leaf below back-facing or in
         shadow, so its radiance is 0); ``visible`` (V,) device uint8 states."""
-        from lodprt.kernels import cut as kcut
+        from lodprt.kernels import light_cut as kcut
 
         wp, dev, N, V = self.wp, self.device, self.h.num_nodes, self.h.num_vertices
         state = {

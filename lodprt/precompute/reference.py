@@ -1,13 +1,13 @@
 """Slow, obviously-correct float64 numpy bake with Embree rays: the oracle of the tests and the baseline of the
 benchmarks. Independent of the Warp kernels (another ray caster, another precision, no shared code path beyond the
-SH reference in ``lodprt.sh``). Needs the ``dev`` extra (embreex)."""
+SH reference in ``lodprt.model.sh``). Needs the ``dev`` extra (embreex)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from lodprt import sh
-from lodprt.scene import Scene
+from lodprt.model import sh
+from lodprt.model.scene import Scene
 
 # visibility states, as in lodprt.kernels.visibility
 SHADOWED, LIT, BACK_FACING = 0, 1, 2

@@ -18,19 +18,17 @@ import dataclasses
 import logging
 import math
 import os
-import sys
 import threading
 import time
-import types
 from typing import Callable
 
 import numpy as np
 
-from lodprt import sh
+from lodprt.model import sh
 from lodprt.devices import resolve_device, warp
 from lodprt.errors import LodprtError
-from lodprt.scene import Scene
-from lodprt.store import FORMAT_NAME, FORMAT_VERSION, StoreWriter, sample_group
+from lodprt.model.scene import Scene
+from lodprt.store.bake_store import FORMAT_NAME, FORMAT_VERSION, StoreWriter, sample_group
 
 log = logging.getLogger(__name__)
 
@@ -211,7 +209,7 @@ def load_kernels(device: str) -> float:
 
     wp = warp()
     t0 = time.perf_counter()
-    from lodprt.kernels import cut as kcut
+    from lodprt.kernels import light_cut as kcut
 
     for module in (kvis, kshade, kcut):
         wp.load_module(module, device=device)
@@ -235,8 +233,8 @@ def bake(
     """Bake light samples of ``scene`` and write the store at ``out``.
 
     ``threshold_deg=None`` bakes every referenced vertex (full resolution); a number bakes, per sample, only the
-    vertices of the light-dependent cut with that incident-angle threshold (``lodprt.cut``; needs the hierarchy).
-    With ``hierarchy`` the vertex hierarchy (``lodprt.hierarchy``) is built first (or ``tree`` is used) and
+    vertices of the light-dependent cut with that incident-angle threshold (``lodprt.precompute.light_cut``; needs the hierarchy).
+    With ``hierarchy`` the vertex hierarchy (``lodprt.model.hierarchy``) is built first (or ``tree`` is used) and
     stored under ``hierarchy/``.
     ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample,
     ``hierarchy_progress(collapses, total)`` while the hierarchy is built.
@@ -261,7 +259,7 @@ def bake(
             _write_scene(writer, scene, baker)
         hierarchy_seconds = None
         if hierarchy:
-            from lodprt.hierarchy import build_hierarchy
+            from lodprt.model.hierarchy import build_hierarchy
 
             t_h = time.perf_counter()
             if tree is None:
@@ -275,7 +273,7 @@ def bake(
         samples: list[dict] = [{} for _ in lights]
         lightcut = None
         if threshold_deg is not None:
-            from lodprt.cut import LightCut
+            from lodprt.precompute.light_cut import LightCut
 
             lightcut = LightCut(tree, baker.points, device)
 
@@ -358,7 +356,7 @@ def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visib
 
 
 def _check_finite(scene: Scene, k: int, light: np.ndarray, coeffs: np.ndarray) -> None:
-    """Refuse to store NaN or infinite coefficients. Scene limits (lodprt.scene) keep float32 finite; this catches
+    """Refuse to store NaN or infinite coefficients. Scene limits (lodprt.model.scene) keep float32 finite; this catches
     what they miss instead of writing a store that renders black or NaN."""
     bad = ~np.isfinite(coeffs).all(axis=tuple(range(1, coeffs.ndim)))  # per vertex; a cut may keep none
     if bad.any():
@@ -395,15 +393,3 @@ def _write_scene(writer: StoreWriter, scene: Scene, baker: _Baker) -> None:
         falloff=lights.falloff,
         radius=lights.radius,
     )
-
-
-class _CallableModule(types.ModuleType):
-    """The first ``import lodprt.bake`` binds the package attribute ``lodprt.bake`` to this module, hiding the public
-    function of that name (lodprt/__init__.py): calling the module calls ``bake``, so ``lodprt.bake(...)`` works
-    whichever was imported first."""
-
-    def __call__(self, *args, **kwargs):
-        return bake(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule
