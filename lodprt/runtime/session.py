@@ -226,12 +226,12 @@ class Runtime:
         self.order = store.sh_order
         # T-15 once per sample (cached, SPEC 5), float32, vertex-major (V, S, C, ncoef): a vertex's samples are
         # one contiguous block for the per-frame gathers
-        first = store._complete(0).astype(np.float32)
+        first = store.complete(0).astype(np.float32)
         self.coeffs = np.empty((first.shape[0], S) + first.shape[1:], np.float32)
         self.coeffs[:, 0] = first
         for k in range(S):
             if k:
-                self.coeffs[:, k] = store._complete(k)
+                self.coeffs[:, k] = store.complete(k)
             if progress:
                 progress(k + 1, S)
         self.channels = self.coeffs.shape[2]

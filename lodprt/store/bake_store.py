@@ -398,10 +398,12 @@ class Store:
         no face uses. Completed samples are cached on this Store object."""
         key = f"completed/{sample}"
         if key not in self._cache:
-            self._cache[key] = self._complete(sample)
+            self._cache[key] = self.complete(sample)
         return self._cache[key]
 
-    def _complete(self, sample: int) -> np.ndarray:
+    def complete(self, sample: int) -> np.ndarray:
+        """(V, C, ncoef) float64 coefficients of ``sample`` completed afresh (T-15), not cached: ``coefficients``
+        caches them."""
         ids, coeffs = self.sample(sample)
         faces = self.faces
         referenced = np.zeros(self.num_vertices, bool)
