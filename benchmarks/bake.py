@@ -52,10 +52,10 @@ def main():
         rows.append({"bake": label, "seconds": res.bake_seconds, "load_s": res.load_seconds,
                      "bytes": int(np.mean([s["bytes"] for s in res.samples]))})
     # keep the coefficients of the last Warp bake to compare
-    from lodprt.precompute.bake import _Baker
+    from lodprt.precompute.bake import Baker
 
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
-    baker = _Baker(scene, order, device, ids)
+    baker = Baker(scene, order, device, ids)
     warp_coeffs = [baker.sample(light)[0][:, 0] for light in scene.lights.positions]
 
     t = time.perf_counter()

@@ -26,7 +26,7 @@ def parser(description: str) -> argparse.ArgumentParser:
 
 def thesis_scene(*, quick: bool, sh_order: int | None = None):
     """The shared Stanford bunny on a 380 x 380 floor with 3 x 1 x 3 light samples (quick: 100 x 100, 2 x 1 x 1)."""
-    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     path = MODELS / "stanford-bunny.obj"
     if not path.is_file():
@@ -34,8 +34,8 @@ def thesis_scene(*, quick: bool, sh_order: int | None = None):
     pos, faces = load_mesh(path)
     res = 100 if quick else 380
     grid = [2, 1, 1] if quick else [3, 1, 3]
-    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (res, 1.0, THESIS_MATERIAL), {"grid": grid}, "lights",
-                     f"stanford-bunny + {res}x{res} floor")
+    return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (res, 1.0, THESIS_MATERIAL), {"grid": grid},
+                          "lights", f"stanford-bunny + {res}x{res} floor")
 
 
 def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:

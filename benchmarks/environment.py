@@ -25,13 +25,13 @@ from common import MODELS, environment, parser, plot_path, table, write
 
 
 def scene_for(quick: bool):
-    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     path = MODELS / "stanford-bunny.obj"
     pos, faces = load_mesh(path)
     floor = None if quick else (60, 1.0, THESIS_MATERIAL)
-    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], floor, {}, "lights",
-                     "stanford-bunny" + ("" if quick else " + 60x60 floor"))
+    return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], floor, {}, "lights",
+                          "stanford-bunny" + ("" if quick else " + 60x60 floor"))
 
 
 class EmbreeBaker:
@@ -148,8 +148,9 @@ def main():
     print(table(rows, cols))
 
     # LOD: keep vertices where transfer vectors differ (the reference 2-bounce transfer), complete the rest (T-15)
-    from lodprt.model.hierarchy import build_hierarchy
-    from lodprt.precompute.transfer import complete_transfer, transfer_cut
+    from lodprt.model.hierarchy_build import build_hierarchy
+    from lodprt.precompute.transfer import transfer_cut
+    from lodprt.store.transfer_store import complete_transfer
 
     t0 = time.perf_counter()
     tree = build_hierarchy(scene.positions, scene.faces, scene.normals)

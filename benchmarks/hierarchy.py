@@ -18,16 +18,17 @@ from common import MODELS, environment, parser, plot_path, table, thesis_scene, 
 
 
 def meshes(quick: bool):
-    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     if quick:
         pos, faces = load_mesh(MODELS / "stanford-bunny.obj")
-        yield "bunny + 60x60 floor", _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (60, 1.0, THESIS_MATERIAL), {}, "l", "q")
+        yield "bunny + 60x60 floor", assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (60, 1.0, THESIS_MATERIAL),
+                                                    {}, "l", "q")
         return
     yield "bunny + 380x380 floor", thesis_scene(quick=False)
     for name in ("spot", "fandisk"):
         pos, faces = load_mesh(MODELS / f"{name}.obj")
-        yield name, _assemble([(name, pos, faces, THESIS_MATERIAL)], None, {}, "l", name)
+        yield name, assemble_scene([(name, pos, faces, THESIS_MATERIAL)], None, {}, "l", name)
 
 
 def pymeshlab_baseline(scene, target_vertices: int) -> float:
@@ -43,7 +44,7 @@ def pymeshlab_baseline(scene, target_vertices: int) -> float:
 
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
-    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy_build import build_hierarchy
 
     rows = []
     for name, scene in meshes(args.quick):

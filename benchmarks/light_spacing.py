@@ -33,7 +33,7 @@ def main():
     from lodprt.precompute import reference
     from lodprt.precompute.bake import bake, ray_offset
     from lodprt.devices import resolve_device
-    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy_build import build_hierarchy
     from lodprt.runtime.lights import LightInterpolator
     from lodprt.store.bake_store import open_store
 

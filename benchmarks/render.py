@@ -37,7 +37,7 @@ def build_store(quick: bool, folder: Path, device: str) -> Path:
 
 def measure(rt, renderer, camera, lights, frames: int, per_vertex: bool) -> dict:
     """Mean update and draw milliseconds over ``frames`` frames of a 1-degree orbit with a moving light."""
-    from lodprt.display.render import orbit
+    from lodprt.runtime.camera import orbit
 
     rt.set_lights(lights)
     rt.set_camera(camera)
@@ -66,8 +66,9 @@ def main():
     p.add_argument("--store", default=None, help="use this bake store instead of baking the thesis scene")
     args = p.parse_args()
     from lodprt.devices import resolve_device
-    from lodprt.display.render import Renderer, scene_centre
-    from lodprt.runtime.session import Camera
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.camera import scene_centre
+    from lodprt.runtime.camera import Camera
     from lodprt.store.bake_store import open_store
 
     device = resolve_device(args.device)  # refuse an unavailable device before baking

@@ -44,7 +44,7 @@ def build_store(quick: bool, folder: Path, device: str) -> Path:
 
 def run_path(rt, path: str, frames: int) -> list[dict]:
     """Per-frame stats of ``rt`` along a camera path (the first frame, which converges from the base, kept apart)."""
-    from lodprt.runtime.session import camera_path
+    from lodprt.runtime.camera import camera_path
 
     out = []
     for cam, lights in camera_path(rt, path, frames):
@@ -77,7 +77,7 @@ def image_error(lod_img: np.ndarray, full_img: np.ndarray) -> tuple[float, float
 def sweep(store, device: str, frames: int, every: int) -> list[dict]:
     """Error-bound sweep over the orbit: triangles, frame time and image error against the full mesh."""
     from lodprt.display.render import Renderer
-    from lodprt.runtime.session import Camera, camera_path
+    from lodprt.runtime.camera import Camera, camera_path
 
     full = Runtime(store, lod=False, device=device)
     rows = []

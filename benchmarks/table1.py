@@ -70,7 +70,7 @@ def main():
     from lodprt.precompute.bake import bake, ray_offset
     from lodprt.model.completion import CompletionPlan
     from lodprt.devices import resolve_device
-    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy_build import build_hierarchy
     from lodprt.store.bake_store import open_store
 
     device = resolve_device(args.device)

@@ -42,8 +42,8 @@ def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
 def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
     """Median ms and triangles along the orbit, and the image error of every ``every``-th frame."""
     from lodprt.display.compare import frame_error
-    from lodprt.display.render import full_frame
-    from lodprt.runtime.session import camera_path
+    from lodprt.runtime.frames import full_frame
+    from lodprt.runtime.camera import camera_path
 
     ms, tris, psnr, rmse = [], [], [], []
     for k, (cam, lights) in enumerate(camera_path(rt, "orbit", frames, size=(400, 300))):

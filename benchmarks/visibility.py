@@ -21,7 +21,7 @@ from common import environment, parser, plot_path, table, thesis_scene, write
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
     from lodprt.precompute import reference
-    from lodprt.precompute.bake import _Baker, load_kernels, ray_offset
+    from lodprt.precompute.bake import Baker, load_kernels, ray_offset
     from lodprt.devices import resolve_device, warp
 
     device = resolve_device(args.device)
@@ -30,7 +30,7 @@ def main():
     load_kernels(device)
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
     t = time.perf_counter()
-    baker = _Baker(scene, 1, device, ids)
+    baker = Baker(scene, 1, device, ids)
     bvh_seconds = time.perf_counter() - t
     t = time.perf_counter()
     caster = reference.EmbreeCaster(scene)

@@ -8,16 +8,16 @@ are processed from the leaves up, so one sweep reaches the fixed point ("repeat 
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})
+from lodprt.kernels.visibility import LIT
 
-LIT = wp.constant(wp.uint8(1))
+wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
 def leaf_light_state(
     points: wp.array(dtype=wp.vec3),  # In: (V,) vertex positions
     normals: wp.array(dtype=wp.vec3),  # In: (V,) unit vertex normals
-    visible: wp.array(dtype=wp.uint8),  # In: (V,) visibility state per vertex (LIT = 1)
+    visible: wp.array(dtype=wp.uint8),  # In: (V,) visibility state per vertex (kernels.visibility states)
     light: wp.vec3,  # In: light position
     active: wp.array(dtype=wp.uint8),  # Out: (N,) 1 for the leaves, 0 above
     dark: wp.array(dtype=wp.uint8),  # Out: (N,) every leaf below back-facing or shadowed
@@ -27,7 +27,7 @@ def leaf_light_state(
 ):
     v = wp.tid()
     active[v] = wp.uint8(1)
-    if visible[v] == LIT:
+    if visible[v] == wp.uint8(LIT):
         to_light = light - points[v]
         d = wp.length(to_light)
         c = float(1.0)

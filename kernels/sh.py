@@ -3,7 +3,7 @@
 Index i = l(l+1) + m, order n = n*n coefficients, no Condon-Shortley phase: y_0 = 1/sqrt(4 pi),
 (y_1^{-1}, y_1^0, y_1^1) = sqrt(3/(4 pi)) (y, z, x).
 
-Same steps as the float64 reference (see the ``lodprt.model.sh`` module docstring): y_l^{+-m} = sqrt(2) Q_l^m(z)
+Same steps as the float64 reference (see the comment above ``lodprt.model.sh.basis``): y_l^{+-m} = sqrt(2) Q_l^m(z)
 {Re, Im} (x + i y)^m with (x + i y)^m from the Cartesian recurrence, and the fully normalised Q_l^m (no sin^m
 factor, no factorial) from Q_m^m = Q_{m-1}^{m-1} sqrt((2m+1)/(2m)) and the normalised three-term recurrence in
 Reinsch's difference form, evaluated at |z| with 1 - |z| = (x^2 + y^2)/(1 + |z|) and parity (-1)^(l-m) for z < 0.

@@ -14,10 +14,9 @@ Coefficients are for a light of unit intensity; the light's RGB intensity is app
 import warp as wp
 
 from lodprt.kernels.sh import bands_of, sh_basis
+from lodprt.kernels.visibility import LIT
 
 wp.set_module_options({"enable_backward": False})
-
-LIT = wp.constant(wp.uint8(1))
 
 
 @wp.func
@@ -41,7 +40,7 @@ def phong_sh(
     normals: wp.array(dtype=wp.vec3),  # In: (V,) unit vertex normals
     material_id: wp.array(dtype=wp.int32),  # In: (V,) material of each vertex
     ids: wp.array(dtype=wp.int32),  # In: (K,) vertices to bake
-    visible: wp.array(dtype=wp.uint8),  # In: (K,) visibility state, LIT = 1
+    visible: wp.array(dtype=wp.uint8),  # In: (K,) visibility state (kernels.visibility)
     kd: wp.array2d(dtype=wp.float32),  # In: (M, C) diffuse albedo per material and channel
     ks: wp.array(dtype=wp.float32),  # In: (M,) specular coefficient
     zonal: wp.array2d(dtype=wp.float32),  # In: (M, order) sqrt(4 pi/(2l+1)) z_l of max(cos,0)^n per material
@@ -58,7 +57,7 @@ def phong_sh(
     for c in range(channels):
         for i in range(ncoef):
             coeffs[k, c, i] = 0.0
-    if visible[k] != LIT:
+    if visible[k] != wp.uint8(LIT):
         return
     n = normals[v]
     l, e = incident(points[v], n, light, falloff, radius)
@@ -89,7 +88,7 @@ def phong_sh_quadrature(
     normals: wp.array(dtype=wp.vec3),  # In: (V,) unit vertex normals
     material_id: wp.array(dtype=wp.int32),  # In: (V,) material of each vertex
     ids: wp.array(dtype=wp.int32),  # In: (K,) vertices to bake
-    visible: wp.array(dtype=wp.uint8),  # In: (K,) visibility state, LIT = 1
+    visible: wp.array(dtype=wp.uint8),  # In: (K,) visibility state (kernels.visibility)
     kd: wp.array2d(dtype=wp.float32),  # In: (M, C) diffuse albedo
     ks: wp.array(dtype=wp.float32),  # In: (M,) specular coefficient
     shininess: wp.array(dtype=wp.float32),  # In: (M,) Phong exponent n
@@ -108,7 +107,7 @@ def phong_sh_quadrature(
     for c in range(channels):
         for i in range(ncoef):
             coeffs[k, c, i] = 0.0
-    if visible[k] != LIT:
+    if visible[k] != wp.uint8(LIT):
         return
     n = normals[v]
     l, e = incident(points[v], n, light, falloff, radius)

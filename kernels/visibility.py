@@ -9,11 +9,12 @@ import warp as wp
 
 wp.set_module_options({"enable_backward": False})
 
-#: visibility states written by :func:`shadow_rays`
-SHADOWED = 0
-LIT = 1
-BACK_FACING = 2
-SKIPPED = 3
+#: Visibility state of a vertex for one light, written by :func:`shadow_rays` as uint8. Defined here once: the
+#: other kernel modules and the host (``lodprt.precompute``, the tests) import these numbers from this module.
+SHADOWED = wp.constant(0)
+LIT = wp.constant(1)
+BACK_FACING = wp.constant(2)  # facing away from the light: no ray cast
+SKIPPED = wp.constant(3)
 
 
 @wp.func

@@ -31,8 +31,8 @@ _LAZY = {
     "Store": "lodprt.store.bake_store",
     "open_store": "lodprt.store.bake_store",
     "Runtime": "lodprt.runtime.session",
-    "Camera": "lodprt.runtime.session",
-    "Frame": "lodprt.runtime.session",
+    "Camera": "lodprt.runtime.camera",
+    "Frame": "lodprt.runtime.frames",
     "LightInterpolator": "lodprt.runtime.lights",
     "Renderer": "lodprt.display.render",
     "Environment": "lodprt.model.environment",
@@ -44,7 +44,7 @@ _LAZY = {
 
 __all__ = ["LodprtError", "SceneError", "StoreError", *_LAZY]
 
-__version__ = "0.1.0"
+from lodprt.version import __version__  # noqa: E402  (re-exported)
 
 
 def __getattr__(name):

@@ -29,16 +29,16 @@ def bunny_path():
 @pytest.fixture(scope="session")
 def bunny_floor(bunny_path):
     """The shared bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices)."""
-    from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
+    from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     pos, faces = load_mesh(bunny_path)
-    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
+    return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
 
 
 @pytest.fixture(scope="session")
 def bunny_hierarchy(bunny_floor):
     """The vertex hierarchy of ``bunny_floor`` (built once per test session)."""
-    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy_build import build_hierarchy
 
     return build_hierarchy(bunny_floor.positions, bunny_floor.faces, bunny_floor.normals)
 
@@ -84,7 +84,7 @@ def pytest_configure(config):
     config.addinivalue_line("markers", "warp_debug: the focused subset that runs every kernel on every store kind; "
                             "`python -m pytest --warp-debug -m warp_debug` runs it bounds-checked")
     if config.getoption("--warp-debug"):
-        import sys
+        import os
 
         import warp as wp
 
@@ -94,9 +94,13 @@ def pytest_configure(config):
         launch = wp.launch
         lock = threading.Lock()  # debug-mode CPU launches from several threads at once crash Warp 1.19 itself
 
-        def named_launch(kernel, *args, **kw):  # a failed bounds check aborts: say which kernel ran last
+        log_path = os.environ.get("LODPRT_WARP_DEBUG_LOG")
+
+        def named_launch(kernel, *args, **kw):  # a failed bounds check aborts: the log names the last kernel
             with lock:
-                print(f"[warp-debug] launch {getattr(kernel, 'key', kernel)}", file=sys.stderr, flush=True)
+                if log_path:
+                    with open(log_path, "a") as f:
+                        f.write(f"{getattr(kernel, 'key', kernel)}\n")
                 return launch(kernel, *args, **kw)
 
         wp.launch = named_launch

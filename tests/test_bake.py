@@ -6,23 +6,23 @@ import pytest
 from lodprt.model import sh
 
 from lodprt.precompute import reference
-from lodprt.precompute.bake import _Baker, bake, load_kernels, material_tables
+from lodprt.precompute.bake import Baker, bake, load_kernels, material_tables
 from lodprt.kernels import shading as kshade
 from lodprt.kernels.visibility import LIT
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
-from lodprt.model.scene import THESIS_MATERIAL, Material, _assemble, load_mesh
+from lodprt.model.scene import THESIS_MATERIAL, Material, assemble_scene, load_mesh
 
 
 def small_scene(bunny_path, material=THESIS_MATERIAL, floor=40, lights=None):
     pos, faces = load_mesh(bunny_path)
-    return _assemble([("bunny", pos, faces, material)], (floor, 0.5, material), lights or {}, "lights", "bunny")
+    return assemble_scene([("bunny", pos, faces, material)], (floor, 0.5, material), lights or {}, "lights", "bunny")
 
 
 def bake_one(scene, device, order, light):
     load_kernels(device)
     ids = np.arange(scene.num_vertices, dtype=np.int32)
-    baker = _Baker(scene, order, device, ids)
+    baker = Baker(scene, order, device, ids)
     return baker.sample(light)
 
 
@@ -111,7 +111,7 @@ def test_shininess_extremes_finite(device, shininess):
     """Shininess 1 to 1000: coefficients finite, reconstruction at R close to the lobe's captured energy."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
     mat = Material(kd=(0.5,) * 3, ks=1.0, shininess=float(shininess))
-    scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), mat)], None, {}, "lights", "tri")
+    scene = assemble_scene([("tri", pos, np.array([[0, 2, 1]]), mat)], None, {}, "lights", "tri")
     coeffs, vis = bake_one(scene, device, 8, np.array([0.3, 1.0, 0.3]))
     assert np.isfinite(coeffs).all()
     assert (vis == LIT).all()
@@ -122,7 +122,7 @@ def test_shininess_extremes_finite(device, shininess):
 def test_light_on_vertex_and_surface_stays_finite(device):
     """A light exactly at a vertex, on a face and a hair above it: finite coefficients, falloff capped by the radius."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1.0]])
-    scene = _assemble([("quad", pos, np.array([[0, 2, 1], [1, 2, 3]]), THESIS_MATERIAL)], None, {}, "lights", "quad")
+    scene = assemble_scene([("quad", pos, np.array([[0, 2, 1], [1, 2, 3]]), THESIS_MATERIAL)], None, {}, "lights", "quad")
     radius = scene.lights.radius
     for light in (pos[0], np.array([0.4, 0.0, 0.3]), np.array([0.0, 1e-9, 0.0])):
         coeffs, vis = bake_one(scene, device, 4, light)
@@ -137,10 +137,10 @@ def test_single_triangle_duplicated_vertices_nonmanifold(device):
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [0, 0, 0], [0, 1, 0.5], [0, -1, 0.5]])
     # faces 0-2 share edge (0, 2)... three faces on one edge (non-manifold); vertex 3 duplicates vertex 0
     faces = np.array([[0, 2, 1], [3, 2, 1], [0, 2, 4], [0, 2, 5]])
-    scene = _assemble([("nm", pos, faces, THESIS_MATERIAL)], None, {}, "lights", "nm")
+    scene = assemble_scene([("nm", pos, faces, THESIS_MATERIAL)], None, {}, "lights", "nm")
     coeffs, vis = bake_one(scene, device, 4, np.array([0.5, 2.0, 0.5]))
     assert np.isfinite(coeffs).all() and np.isfinite(scene.normals).all()
-    single = _assemble([("tri", pos[:3], faces[:1], THESIS_MATERIAL)], None, {}, "lights", "tri")
+    single = assemble_scene([("tri", pos[:3], faces[:1], THESIS_MATERIAL)], None, {}, "lights", "tri")
     c1, _ = bake_one(single, device, 4, np.array([0.5, 2.0, 0.5]))
     assert np.isfinite(c1).all() and (c1[:, 0, 0] > 0).all()
 
@@ -151,10 +151,10 @@ def test_layout_leaves_out_what_the_scene_does_not_need(tmp_path, device):
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
     tri = np.array([[0, 2, 1]])
     light = {"box": [0, 1, 0, 1, 2, 1], "grid": [1, 1, 1]}
-    diffuse = _assemble([("t", pos, tri, Material((0.5,) * 3, 0.0, 2.0))], None, light, "lights", "t")
+    diffuse = assemble_scene([("t", pos, tri, Material((0.5,) * 3, 0.0, 2.0))], None, light, "lights", "t")
     res = bake(diffuse, tmp_path / "d.zarr", sh_order=4, device=device)
     assert (res.coefficients_per_vertex, res.channels) == (1, 1)
-    colour = _assemble([("t", pos, tri, Material((0.6, 0.3, 0.15), 0.2, 2.0))], None, light, "lights", "t")
+    colour = assemble_scene([("t", pos, tri, Material((0.6, 0.3, 0.15), 0.2, 2.0))], None, light, "lights", "t")
     res = bake(colour, tmp_path / "c.zarr", sh_order=3, device=device)
     assert (res.coefficients_per_vertex, res.channels) == (9, 3)
     from lodprt.store.bake_store import open_store
@@ -169,7 +169,7 @@ def test_layout_leaves_out_what_the_scene_does_not_need(tmp_path, device):
 def test_grazing_light_is_finite(device):
     """A light in (or a hair above) the plane of a flat patch: finite, equal to the float64 closed form (specular only)."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1.0]])
-    scene = _assemble([("quad", pos, np.array([[0, 2, 1], [1, 2, 3]]), THESIS_MATERIAL)], None, {}, "lights", "quad")
+    scene = assemble_scene([("quad", pos, np.array([[0, 2, 1], [1, 2, 3]]), THESIS_MATERIAL)], None, {}, "lights", "quad")
     for light in (np.array([3.0, 0.0, 0.5]), np.array([3.0, 1e-6, 0.5])):
         coeffs, vis = bake_one(scene, device, 4, light)
         assert np.isfinite(coeffs).all()
@@ -181,8 +181,8 @@ def test_grazing_light_is_finite(device):
 def test_bake_scales_with_the_scene(device, bunny_path, scale):
     """Scaling the scene by s scales every coefficient by 1/s^2 (inverse-square falloff) and keeps visibility."""
     pos, faces = load_mesh(bunny_path)
-    ref = _assemble([("b", pos, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), {}, "lights", "b")
-    big = _assemble([("b", pos * scale, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), {}, "lights", "b")
+    ref = assemble_scene([("b", pos, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), {}, "lights", "b")
+    big = assemble_scene([("b", pos * scale, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), {}, "lights", "b")
     c1, v1 = bake_one(ref, device, 4, ref.lights.positions[4])
     c2, v2 = bake_one(big, device, 4, big.lights.positions[4])
     assert np.mean(v1 != v2) < 1e-3
@@ -198,7 +198,7 @@ def test_lodprt_bake_is_the_function_after_the_module_is_imported():
 
     assert lodprt.bake is module.bake and callable(lodprt.bake)
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
-    scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
+    scene = assemble_scene([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
     with pytest.raises(LodprtError, match="threshold_deg"):
         lodprt.bake(scene, None, device="cpu", hierarchy=False, threshold_deg=30.0)
 
@@ -208,7 +208,7 @@ def test_ray_offset_is_a_python_float_far_from_the_origin():
     from lodprt.precompute.bake import ray_offset
 
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]]) * 1e-3 + 1e3
-    scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
+    scene = assemble_scene([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
     offset = ray_offset(scene)
     assert type(offset) is float and offset > 1e-4 * scene.diagonal
 
@@ -218,7 +218,7 @@ def test_non_finite_coefficients_stop_the_bake_naming_the_sample():
     from lodprt.precompute.bake import _check_finite
 
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]])
-    scene = _assemble([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
+    scene = assemble_scene([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
     coeffs = np.ones((3, 1, 4), np.float32)
     _check_finite(scene, 0, np.zeros(3), coeffs)
     coeffs[1, 0, 2] = np.inf

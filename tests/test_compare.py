@@ -20,7 +20,7 @@ def test_compare_figure_numbers_and_error_bound(cut_store, tmp_path):
     """The figure is written; the LOD frame has fewer triangles than the full one, and a tighter error bound gives
     more triangles and a smaller difference."""
     from lodprt.display.compare import compare_figure
-    from lodprt.runtime.session import Camera
+    from lodprt.runtime.camera import Camera
     from lodprt.store.bake_store import open_store
 
     store = open_store(cut_store)

@@ -3,18 +3,19 @@
 import numpy as np
 import pytest
 
-from lodprt.precompute.bake import _Baker, bake, load_kernels
+from lodprt.precompute.bake import Baker, bake, load_kernels
 from lodprt.model.completion import RULE_T15, CompletionPlan, ring_weights
 from lodprt.precompute.light_cut import LightCut
-from lodprt.model.hierarchy import active_ancestors, build_hierarchy
+from lodprt.model.hierarchy import active_ancestors
+from lodprt.model.hierarchy_build import build_hierarchy
 from lodprt.kernels.visibility import LIT
-from lodprt.model.scene import Material, _assemble, floor_mesh
+from lodprt.model.scene import Material, assemble_scene, floor_mesh
 
 
 def light_cut(scene, h, device, light, threshold):
     load_kernels(device)
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
-    baker = _Baker(scene, 2, device, ids)
+    baker = Baker(scene, 2, device, ids)
     kept, nodes, dark, coeffs, vis = baker.sample_cut(light, LightCut(h, baker.points, device), threshold)
     return baker, kept, nodes, dark, coeffs, vis
 
@@ -25,7 +26,7 @@ def test_cuts_are_valid_fronts(device, bunny_floor, bunny_hierarchy, threshold):
     h = bunny_hierarchy
     ids = np.flatnonzero(bunny_floor.referenced).astype(np.int32)
     load_kernels(device)
-    baker = _Baker(bunny_floor, 2, device, ids)
+    baker = Baker(bunny_floor, 2, device, ids)
     lc = LightCut(h, baker.points, device)
     import warp as wp
 
@@ -61,7 +62,7 @@ def test_threshold_monotone_and_eps0_keeps_lit(device, bunny_floor, bunny_hierar
 def test_uniform_incidence_collapses_to_the_base(device):
     """A plane under a very distant light (nothing shadowed, all angles equal within 5 deg) keeps only the base."""
     pos, faces = floor_mesh(np.array([[0, 0, 0], [1, 0, 1.0]]), 30, 0.0, 1.0)
-    scene = _assemble([("plane", pos, faces, Material((0.8,) * 3, 0.0, 1.0))], None,
+    scene = assemble_scene([("plane", pos, faces, Material((0.8,) * 3, 0.0, 1.0))], None,
                       {"box": [0.4, 1e6, 0.4, 0.6, 1e6 + 1, 0.6], "grid": [1, 1, 1], "falloff": "none"}, "l", "plane")
     h = build_hierarchy(scene.positions, scene.faces, scene.normals)
     _, kept, _, _, _, vis = light_cut(scene, h, device, scene.lights.positions[0], 5.0)
@@ -101,7 +102,7 @@ def test_cut_bake_coefficients_identical_to_full(tmp_path, device, bunny_floor, 
 
 def test_completion_of_constant_and_linear_fields(bunny_floor, bunny_hierarchy):
     """Equal neighbour coefficients complete to exactly those; on the flat floor a linear field is reproduced."""
-    from lodprt.model.hierarchy import Cut
+    from lodprt.runtime.view_cut import Cut
 
     h = bunny_hierarchy
     plan = CompletionPlan(h, bunny_floor.positions, bunny_floor.normals)

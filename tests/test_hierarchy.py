@@ -4,7 +4,10 @@ import numpy as np
 import pytest
 
 from lodprt.errors import LodprtError
-from lodprt.model.hierarchy import Cut, Hierarchy, active_ancestors, build_hierarchy, pymeshlab_levels
+from lodprt.model.hierarchy import Hierarchy, active_ancestors
+from lodprt.model.hierarchy_build import build_hierarchy
+from lodprt.model.hierarchy_levels import pymeshlab_levels
+from lodprt.runtime.view_cut import Cut
 from lodprt.model.scene import vertex_normals
 
 

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from lodprt.display.irradiance_render import irradiance_gl, render_irradiance
 from lodprt.model import environment as E
 from lodprt.model import irradiance as I
 from lodprt.model import sh
@@ -89,7 +90,7 @@ def test_glsl_shader_matches_cpu():
     env = E.procedural("spots", resolution=32)
     L = I.lighting_coefficients(env)
     n = unit_normals(3000)
-    gpu = _gl(I.irradiance_gl, n, L)
+    gpu = _gl(irradiance_gl, n, L)
     cpu = I.irradiance(n, L)
     assert gpu.shape == (3000, 3)
     assert np.abs(gpu - cpu).max() < 2e-5 * np.abs(cpu).max()
@@ -103,7 +104,7 @@ def test_render_irradiance_centre_pixel():
     m = trimesh.creation.icosphere(subdivisions=4)
     env = E.procedural("sky", resolution=32)
     L = I.lighting_coefficients(env)
-    img = _gl(I.render_irradiance, m.vertices, m.faces, m.vertex_normals, L, albedo=(0.5, 0.5, 0.5), eye=(0, 0, 4),
+    img = _gl(render_irradiance, m.vertices, m.faces, m.vertex_normals, L, albedo=(0.5, 0.5, 0.5), eye=(0, 0, 4),
               target=(0, 0, 0), size=(64, 64), exposure=0.5)
     x = np.clip(0.5 * 0.5 * I.irradiance([0, 0, 1], L) / np.pi, 0, 1)
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055) * 255

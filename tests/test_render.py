@@ -68,8 +68,11 @@ def test_tone_map_srgb():
 # Frames: the SH renderer against CPU ray casting of the same frame
 
 from lodprt.model import sh  # noqa: E402
-from lodprt.display.render import Renderer, camera_matrices, full_frame  # noqa: E402
-from lodprt.runtime.session import Camera, Frame  # noqa: E402
+from lodprt.display.render import Renderer
+from lodprt.runtime.camera import camera_matrices
+from lodprt.runtime.frames import full_frame
+from lodprt.runtime.camera import Camera
+from lodprt.runtime.frames import Frame
 
 trimesh = pytest.importorskip("trimesh")
 

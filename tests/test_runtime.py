@@ -3,10 +3,13 @@
 import numpy as np
 import pytest
 
+from lodprt.runtime.errors_reference import node_errors_reference
+
 from lodprt.model import sh
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import active_ancestors, dependency_violations
-from lodprt.runtime.session import Camera, Runtime, clip_planes, view_projection
+from lodprt.runtime.camera import Camera, clip_planes, view_projection
+from lodprt.runtime.session import Runtime
 from lodprt.store.bake_store import open_store
 
 
@@ -107,7 +110,7 @@ def test_kernel_errors_match_float64_reference(rt, device, seed):
     r.set_lights(box[:3] + rng.random((2, 3)) * (box[3:] - box[:3]), colors=rng.random((2, 3)))
     nodes = np.arange(r.h.num_vertices, r.h.num_nodes)
     c1, e1, g1, l1, f1, d1 = r.node_errors(nodes)
-    c2, e2, g2, l2, f2, d2 = r.node_errors_reference(nodes)
+    c2, e2, g2, l2, f2, d2 = node_errors_reference(r, nodes)
     assert (c1 != c2).mean() < 1e-4  # float32 ties at a plane or a cone boundary only
     ok = c1 == c2
     np.testing.assert_allclose(g1[ok], g2[ok], atol=2e-5)
@@ -159,7 +162,7 @@ def test_zero_error_bound_refines_everything_visible(store):
     assert_legal(r)
     act = np.flatnonzero(r.cut.active)
     internal = act[act >= r.h.num_vertices]
-    culled, err = r.node_errors_reference(internal)[:2]
+    culled, err = node_errors_reference(r, internal)[:2]
     assert (culled | (err < 1e-6)).all()  # float32 rounding of a sub-nanopixel geometric error
     big = Runtime(store, error_bound=1.0, criterion="thesis")  # T-14 at the top of its scale: nothing refines
     f = converge(big, orbit_camera(big, 0.3, dist=1.2, height=0.8))
@@ -197,7 +200,7 @@ def test_culling_is_conservative(store):
     r = Runtime(store)
     r.set_camera(orbit_camera(r, 1.1, dist=0.5, height=0.3, fov=30))
     nodes = np.arange(r.h.num_vertices, r.h.num_nodes)
-    culled = r.node_errors_reference(nodes).culled
+    culled = node_errors_reference(r, nodes).culled
     planes = clip_planes(view_projection(r.camera, r.bounds))
     eye = np.asarray(r.camera.eye)
     rng = np.random.default_rng(3)
@@ -212,13 +215,13 @@ def test_culling_is_conservative(store):
 def test_lumi_error_bounds_the_leaf_spread(store):
     """e_lumi is at least the true display spread (max - min of clip(L / white, 0, 1)) of the leaves' radiance toward
     the node's view direction, and it is 0 for a node whose leaves all read the same."""
-    from lodprt.runtime.session import display
+    from lodprt.runtime.frames import display
 
     r = Runtime(store)
     r.set_camera(orbit_camera(r, 0.4))
     r.set_lights([store.light_positions[1] * 0.6 + store.light_positions[4] * 0.4])
     nodes = np.random.default_rng(1).choice(np.arange(r.h.num_vertices, r.h.num_nodes), 400, replace=False)
-    ne = r.node_errors_reference(nodes)
+    ne = node_errors_reference(r, nodes)
     culled, lumi = ne.culled, ne.e_lumi
     nodes, lumi = nodes[~culled], lumi[~culled]  # culled nodes get no error (they are coarsened regardless)
     assert len(nodes) > 100
@@ -233,7 +236,7 @@ def test_lumi_error_bounds_the_leaf_spread(store):
     assert tight > len(nodes) // 4  # a bound, but not a loose one: within 0.05 for many nodes
     dark = np.flatnonzero(np.abs(r.box_centre).max((1, 2, 3)) + np.abs(r.box_half).max((1, 2, 3)) == 0)
     if len(dark):
-        assert (r.node_errors_reference(dark[:50] + r.h.num_vertices)[3] == 0).all()
+        assert (node_errors_reference(r, dark[:50] + r.h.num_vertices)[3] == 0).all()
 
 
 @pytest.mark.parametrize("cam", [
@@ -317,7 +320,7 @@ def test_cli_frames_json(bunny_bake, capsys):
 def test_light_radiance_without_a_runtime(store, bunny_floor, tmp_path):
     """light_radiance equals Runtime.radiance, and works on a store baked without a hierarchy (full bake)."""
     from lodprt.precompute.bake import bake
-    from lodprt.runtime.session import light_radiance
+    from lodprt.runtime.frames import light_radiance
 
     x = [0.4 * store.light_positions[2] + 0.6 * store.light_positions[7]]
     r = Runtime(store, lod=False)

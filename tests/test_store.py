@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from lodprt.model import sh
-from lodprt.precompute.bake import _Baker, bake, load_kernels
+from lodprt.precompute.bake import Baker, bake, load_kernels
 from lodprt.errors import StoreError
-from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
+from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 from lodprt.store.bake_store import open_store
 
 LIGHTS = {"grid": [2, 1, 2]}
@@ -20,7 +20,7 @@ LIGHTS = {"grid": [2, 1, 2]}
 @pytest.fixture(scope="module")
 def small(bunny_path):
     pos, faces = load_mesh(bunny_path)
-    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), LIGHTS, "lights", "bunny")
+    return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (30, 0.5, THESIS_MATERIAL), LIGHTS, "lights", "bunny")
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +39,7 @@ def test_round_trip_exact(small, baked):
     np.testing.assert_array_equal(store.light_positions, small.lights.positions.astype(np.float32))
     load_kernels("cpu")
     ids = np.flatnonzero(small.referenced).astype(np.int32)
-    baker = _Baker(small, 3, "cpu", ids)
+    baker = Baker(small, 3, "cpu", ids)
     for k, light in enumerate(small.lights.positions):
         got_ids, got = store.sample(k)
         np.testing.assert_array_equal(got_ids, ids)
@@ -49,7 +49,7 @@ def test_round_trip_exact(small, baked):
 
 def test_hierarchy_stored_and_reported(small, baked):
     """The bake stores the vertex hierarchy bit for bit and info reports its nodes, roots and build time."""
-    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy_build import build_hierarchy
 
     path, res = baked
     store = open_store(path)

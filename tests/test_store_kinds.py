@@ -5,8 +5,9 @@ vertices (the bunny on a 40 x 40 floor), so that an index past an array's end la
 The identities are checked per channel against references written from the arrays themselves (their widths, not
 the settings the code uses): ``radiance --sample K`` == ``radiance --light <sample K>`` == ``full_frame(sample=K)``
 == ``full_frame(lights=[sample K])`` == ``Runtime.radiance`` == ``light_radiance``; a diffuse full-resolution store
-equals the closed form ``kd (N.L) I / d^2`` with Embree's visibility. Marked ``warp_debug``: the bounds-checked
-subset (``python -m pytest --warp-debug -m warp_debug``, docs/TESTING.md) runs them with Warp's bounds checks.
+equals the closed form ``kd (N.L) I / d^2`` with Embree's visibility. The kernel tests are marked ``warp_debug``: the
+bounds-checked subset (``python -m pytest --warp-debug -m warp_debug``, docs/TESTING.md) runs them with Warp's
+bounds checks (the command tests add no kernel the others do not run).
 """
 
 import dataclasses
@@ -14,10 +15,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+from lodprt.runtime.errors_reference import node_errors_reference
+
 from lodprt.errors import LodprtError
 from lodprt.model.scene import Material
-
-pytestmark = pytest.mark.warp_debug
 
 GREY, RGB = (0.7, 0.7, 0.7), (0.9, 0.5, 0.2)
 #: name -> (kd, ks, threshold_deg (None: full resolution), hierarchy, sh_order)
@@ -60,12 +61,15 @@ def expected_width(kd, ks, order):
     return (order * order if ks > 0 else 1), (1 if kd[0] == kd[1] == kd[2] else 3)
 
 
+@pytest.mark.warp_debug
 @pytest.mark.parametrize("name", list(KINDS))
 def test_every_radiance_path_agrees(kinds, name):
     """For every store kind, the six radiance paths give the same (V, 3) radiance, channel by channel, and the
     store holds the coefficient width its material calls for."""
-    from lodprt.display.render import full_frame
-    from lodprt.runtime.session import Camera, Runtime, light_radiance
+    from lodprt.runtime.frames import full_frame
+    from lodprt.runtime.camera import Camera
+    from lodprt.runtime.frames import light_radiance
+    from lodprt.runtime.session import Runtime
     from lodprt.store.bake_store import open_store
 
     kd, ks, _, hier, order = KINDS[name]
@@ -102,6 +106,7 @@ def test_every_radiance_path_agrees(kinds, name):
                                            err_msg=f"{name}: {label}, channel {c}")
 
 
+@pytest.mark.warp_debug
 @pytest.mark.parametrize("name", ["grey-diffuse-cut", "rgb-diffuse-cut", "rgb-diffuse-full"])
 def test_diffuse_radiance_does_not_depend_on_the_eye(kinds, name):
     """A diffuse store's radiance is the same from two different eyes (T-7 with y_0 alone)."""
@@ -112,6 +117,7 @@ def test_diffuse_radiance_does_not_depend_on_the_eye(kinds, name):
     np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7)
 
 
+@pytest.mark.warp_debug
 def test_diffuse_full_store_equals_the_closed_form(kinds):
     """rgb-diffuse-full: every channel of every vertex is kd_c (N.L) I_c / max(d, radius)^2 where Embree sees the
     light, 0 where it does not (a handful of grazing rays may disagree between the two casters)."""
@@ -138,6 +144,7 @@ def test_diffuse_full_store_equals_the_closed_form(kinds):
         assert close.mean() > 0.998, f"sample {k}: {np.count_nonzero(~close)} of {len(used)} vertices differ"
 
 
+@pytest.mark.warp_debug
 @pytest.mark.parametrize("order", range(1, 9))
 def test_runtime_kernels_on_every_order(bunny_floor, bunny_hierarchy, tmp_path, order):
     """SH orders 1..8 (grey, specular: order^2 coefficients; order 1 is y_0 alone): the view-cut frame's
@@ -157,11 +164,12 @@ def test_runtime_kernels_on_every_order(bunny_floor, bunny_hierarchy, tmp_path, 
     ref = rt.radiance(EYES[0])[fr.vertex_ids]
     np.testing.assert_allclose(fr.radiance, ref, atol=1e-4 * float(np.abs(ref).max()), rtol=1e-3)
     nodes = np.arange(rt.h.num_vertices, rt.h.num_nodes, dtype=np.int32)[::7]
-    got, want = rt.node_errors(nodes), rt.node_errors_reference(nodes)
+    got, want = rt.node_errors(nodes), node_errors_reference(rt, nodes)
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_allclose(got[3], want[3], atol=2e-3)
 
 
+@pytest.mark.warp_debug
 @pytest.mark.parametrize("name", ["grey-diffuse-cut", "rgb-diffuse-cut", "rgb-sh-cut"])
 def test_view_cut_relighting_on_every_kind(kinds, name):
     """The view-cut frame of a 1- or n^2-coefficient, 1- or 3-channel store: relit radiance equals the float64
@@ -179,7 +187,7 @@ def test_view_cut_relighting_on_every_kind(kinds, name):
         ref = rt.radiance(eye)[fr.vertex_ids]
         np.testing.assert_allclose(fr.radiance, ref, atol=1e-4 * float(np.abs(ref).max()), rtol=1e-3)
     nodes = np.arange(rt.h.num_vertices, rt.h.num_nodes, dtype=np.int32)[::5]
-    got, want = rt.node_errors(nodes), rt.node_errors_reference(nodes)
+    got, want = rt.node_errors(nodes), node_errors_reference(rt, nodes)
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_allclose(got[3], want[3], atol=2e-3)
 
@@ -249,7 +257,7 @@ def test_huge_render_size_is_a_clear_error(kinds, tmp_path, capsys, gl):
 
 def test_camera_straight_down_picks_another_up(kinds, tmp_path, gl):
     """A camera looking straight down with up = +y renders (another up vector is chosen) instead of failing."""
-    from lodprt.display.render import look_at
+    from lodprt.runtime.camera import look_at
 
     m = look_at((0, 2, 0), (0, 0, 0), (0, 1, 0))
     assert np.isfinite(m).all() and np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3))

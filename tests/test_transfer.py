@@ -10,7 +10,8 @@ from lodprt.model import sh
 from lodprt.runtime import environment_relight as relight
 from lodprt.precompute import transfer as T
 from lodprt.errors import LodprtError
-from lodprt.model.scene import Material, _assemble, vertex_normals
+from lodprt.model.scene import Material, assemble_scene, vertex_normals
+from lodprt.store.transfer_store import complete_transfer
 
 
 def icosphere(subdivisions=2, radius=1.0, centre=(0, 0, 0)):
@@ -288,7 +289,7 @@ def small_scene(floor=12):
     pos, faces = icosphere(2, 0.5, (0, 0.5, 0))
     shiny = Material(kd=(0.7, 0.5, 0.3), ks=0.3, shininess=10.0)
     matte = Material(kd=(0.6, 0.6, 0.6), ks=0.0, shininess=1.0)
-    return _assemble([("ball", pos, faces, shiny)], (floor, 1.0, matte), {}, "lights", "ball")
+    return assemble_scene([("ball", pos, faces, shiny)], (floor, 1.0, matte), {}, "lights", "ball")
 
 
 @pytest.mark.warp_debug
@@ -364,7 +365,7 @@ def test_cli_short_forms_bake_and_render_with_environment(tmp_path, capsys, gl):
 @pytest.fixture(scope="module")
 def ball_lod():
     """The ball on a 40 x 40 floor (1,762 vertices), its shadowed transfer (cpu) and its vertex hierarchy."""
-    from lodprt.model.hierarchy import build_hierarchy
+    from lodprt.model.hierarchy_build import build_hierarchy
 
     scene = small_scene(floor=40)
     g = T.Geometry.from_scene(scene, device="cpu")
@@ -391,7 +392,7 @@ def test_transfer_cut_keeps_fewer_vertices_and_completes_close(ball_lod):
     kept, errs = [], []
     for eps in (0.05, 0.01):
         cut = T.transfer_cut(tree, t, eps)
-        done = T.complete_transfer(tree, scene.positions, scene.normals, cut, t[tree.vertex[cut]])
+        done = complete_transfer(tree, scene.positions, scene.normals, cut, t[tree.vertex[cut]])
         assert np.array_equal(done[tree.vertex[cut]], t[tree.vertex[cut]])
         rad = relight.diffuse_radiance(done, L)
         kept.append(len(cut))
@@ -409,7 +410,7 @@ def test_lod_store_completes_on_reading(ball_lod, tmp_path):
     store = relight.open_transfer(out)
     assert store.attrs["vertices_kept"] == len(res.cut_nodes) < scene.num_vertices
     assert store.read("transfer/diffuse").shape == (len(res.cut_nodes), 3, 9)
-    expect = T.complete_transfer(tree, store.read("scene/positions").astype(np.float64),
-                                 store.read("scene/normals").astype(np.float64), res.cut_nodes,
-                                 res.diffuse.transfer[tree.vertex[res.cut_nodes]].astype(np.float64))
+    expect = complete_transfer(tree, store.read("scene/positions").astype(np.float64),
+                               store.read("scene/normals").astype(np.float64), res.cut_nodes,
+                               res.diffuse.transfer[tree.vertex[res.cut_nodes]].astype(np.float64))
     assert np.allclose(store.diffuse(), expect, atol=1e-6)

@@ -59,14 +59,14 @@ def box_shadow(tmp_path_factory):
 
 
 def top_camera(**kw):
-    from lodprt.runtime.session import Camera
+    from lodprt.runtime.camera import Camera
 
     return Camera(eye=(0.0, 2.2, 0.8), target=(0.0, 0.0, 0.0), width=kw.get("width", 240), height=kw.get("height", 180))
 
 
 def box_pixels(cam) -> np.ndarray:
     """(H, W) bool: the screen rectangle around the floating box's projection (its corners), widened by 3 pixels."""
-    from lodprt.display.render import camera_matrices
+    from lodprt.runtime.camera import camera_matrices
 
     corners = np.array([[x, y, z] for x in (-0.15, 0.15) for y in (0.35, 0.45) for z in (-0.15, 0.15)])
     view, proj = camera_matrices(cam, corners)
@@ -122,7 +122,8 @@ def test_specular_highlight_on_a_plane_is_kept(tmp_path):
     within the bound of full resolution and the frame within 35 dB, though the plane has no geometric error."""
     from lodprt.display.compare import frame_error
     from lodprt.display.render import Renderer
-    from lodprt.runtime.session import Camera, DEFAULT_ERROR_BOUND
+    from lodprt.runtime.camera import Camera
+    from lodprt.runtime.session import DEFAULT_ERROR_BOUND
 
     store = bake_scene(tmp_path, {"plane": grid_plane(121, 2.0)}, light=(-0.4, 0.8, 0.0), ks=0.8, shininess=40.0,
                        falloff="inverse-square", order=6)

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lodprt.runtime.session import Camera
+from lodprt.runtime.camera import Camera
 from lodprt.display.viewer import Slider, Viewer, ViewerState, slider_layout
 
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from lodprt.precompute import reference
-from lodprt.precompute.bake import _Baker, load_kernels, ray_offset
+from lodprt.precompute.bake import Baker, load_kernels, ray_offset
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
-from lodprt.model.scene import THESIS_MATERIAL, _assemble, load_mesh
+from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
 embreex = pytest.importorskip("embreex")
 
@@ -18,13 +18,13 @@ def embree_visibility(scene, light, offset):
 
 def bunny_floor(bunny_path, resolution=200, scale=1.0):
     pos, faces = load_mesh(bunny_path, scale=scale)
-    return _assemble([("bunny", pos, faces, THESIS_MATERIAL)], (resolution, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
+    return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (resolution, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
 
 
 def kernel_visibility(scene, device, light):
     load_kernels(device)
     ids = np.arange(scene.num_vertices, dtype=np.int32)
-    baker = _Baker(scene, 2, device, ids)
+    baker = Baker(scene, 2, device, ids)
     return baker.visibility(light).numpy(), baker.offset
 
 
@@ -47,7 +47,7 @@ def test_light_on_a_vertex_and_on_the_surface(device):
     """A light exactly at a vertex or on a face counts as lit there (finite, no ray through itself)."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1.0]])
     faces = np.array([[0, 2, 1], [1, 2, 3]])
-    scene = _assemble([("quad", pos, faces, THESIS_MATERIAL)], None, {}, "lights", "quad")
+    scene = assemble_scene([("quad", pos, faces, THESIS_MATERIAL)], None, {}, "lights", "quad")
     vis, _ = kernel_visibility(scene, device, pos[0])
     assert vis[0] == LIT
     vis, _ = kernel_visibility(scene, device, np.array([0.5, 0.0, 0.5]))
@@ -57,7 +57,7 @@ def test_light_on_a_vertex_and_on_the_surface(device):
 def test_back_facing_vertices_cast_no_ray(device):
     """A light below a single upward triangle makes every vertex BACK_FACING (decided by the normal alone)."""
     pos = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0.0]])
-    scene = _assemble([("tri", pos, np.array([[0, 1, 2]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
+    scene = assemble_scene([("tri", pos, np.array([[0, 1, 2]]), THESIS_MATERIAL)], None, {}, "lights", "tri")
     assert np.allclose(scene.normals, [0, 1, 0])
     vis, _ = kernel_visibility(scene, device, np.array([0.3, -1.0, 0.3]))
     assert (vis == BACK_FACING).all()
@@ -72,7 +72,7 @@ def test_occluder_between_light_and_vertex(device):
     ffaces = np.array([[0, 1, 4], [1, 3, 4], [3, 2, 4], [2, 0, 4]])
     occ = np.array([[-0.1, 0.5, -0.1], [-0.1, 0.5, 0.1], [0.1, 0.5, 0.0]])
     objects = [("floor", floor, ffaces, THESIS_MATERIAL), ("occ", occ, np.array([[0, 2, 1]]), THESIS_MATERIAL)]
-    scene = _assemble(objects, None, {}, "lights", "occ")
+    scene = assemble_scene(objects, None, {}, "lights", "occ")
     vis, _ = kernel_visibility(scene, device, np.array([0.0, 2.0, 0.0]))
     assert vis[4] == SHADOWED
     assert (vis[:4] == LIT).all()

@@ -1,23 +1,40 @@
 """The environment-lighting commands of ``lodprt``: irradiance, bake-environment, render-environment.
 
-``lodprt.cli.main`` registers them with :func:`add_parsers` and dispatches through :data:`COMMANDS`; the work is done
-in :mod:`lodprt.model.environment`, :mod:`lodprt.model.irradiance`, :mod:`lodprt.precompute.transfer` and :mod:`lodprt.runtime.environment_relight`.
+:func:`register` adds them to the lodprt parser; :func:`bake_environment` and :func:`render_environment` are also
+what the short forms ``lodprt bake SCENE --environment ENV`` and ``lodprt render OUT --environment ENV`` call. The
+work is done in :mod:`lodprt.model.environment`, :mod:`lodprt.model.irradiance`, :mod:`lodprt.precompute.transfer`
+and :mod:`lodprt.runtime.environment_relight`.
 """
 
 from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
+from lodprt.cli import args as cli_args
+from lodprt.cli.progress import ProgressBars
 from lodprt.errors import LodprtError
 
 ENV_HELP = ("environment: a lat-long .hdr/.exr/.npy (H, 2H, 3), a .npy cube (6, N, N, 3), a folder of six faces "
             "px nx py ny pz nz, or a procedural name: sky, spots, constant (sky:256 sets the resolution)")
 
+# bake-environment's defaults (also those of the short form bake --environment)
+SH_ORDER = 3
+TRANSFERS = ("unshadowed", "shadowed", "interreflected")
+TRANSFER = "interreflected"
+RAYS = 256
+BOUNCES = 4
+BOUNCE_THRESHOLD = 1e-3
 
-def add_parsers(sub) -> None:
-    """Add the three subcommands to ``sub`` (the subparsers object of the lodprt parser)."""
+
+def register(sub) -> None:
+    """Add irradiance, bake-environment and render-environment to ``sub`` (the lodprt parser's subparsers)."""
+    _add_irradiance(sub)
+    _add_bake_environment(sub)
+    _add_render_environment(sub)
+
+
+def _add_irradiance(sub) -> None:
     ir = sub.add_parser(
         "irradiance",
         help="9-coefficient irradiance of an environment (Ramamoorthi-Hanrahan): coefficients, constants, matrices",
@@ -27,8 +44,11 @@ def add_parsers(sub) -> None:
     )
     ir.add_argument("environment", metavar="ENV", help=ENV_HELP)
     ir.add_argument("--mip", type=int, default=0, metavar="K", help="project from mip level K (each level halves the resolution)")
-    ir.add_argument("--json", action="store_true", help="print a JSON object")
+    cli_args.add_json(ir)
+    ir.set_defaults(handler=cmd_irradiance)
 
+
+def _add_bake_environment(sub) -> None:
     be = sub.add_parser(
         "bake-environment",
         help="bake distant-light transfer (diffuse vectors, glossy matrices) for every vertex of a scene",
@@ -36,26 +56,28 @@ def add_parsers(sub) -> None:
         "interreflected transfer vectors, and glossy transfer matrices for materials with ks > 0. Writes a "
         "lodprt-transfer zarr store (docs/ENVIRONMENT.md).",
     )
-    be.add_argument("scene", metavar="SCENE", help="'demo', a .toml scene file, or a mesh")
-    be.add_argument("-o", "--out", required=True, metavar="OUT.zarr", help="store to write (never replaced without --overwrite)")
+    cli_args.add_scene(be)
+    cli_args.add_store_output(be, "transfer")
     be.add_argument("--environment", default=None, metavar="ENV", help="store this environment's coefficients as the default lighting; " + ENV_HELP)
-    be.add_argument("--sh-order", type=int, default=3, metavar="N", help="SH bands of the transfer (default 3: 9 coefficients)")
-    be.add_argument("--transfer", choices=["unshadowed", "shadowed", "interreflected"], default="interreflected",
-                    help="diffuse transfer (default interreflected)")
-    be.add_argument("--rays", type=int, default=256, metavar="R", help="rays per vertex (spherical Fibonacci set, default 256)")
-    be.add_argument("--bounces", type=int, default=4, metavar="B", help="most interreflection passes (default 4)")
-    be.add_argument("--bounce-threshold", type=float, default=1e-3, metavar="T",
-                    help="stop when a pass' energy is below T times the direct pass' (default 1e-3)")
+    be.add_argument("--sh-order", type=int, default=SH_ORDER, metavar="N",
+                    help=f"SH bands of the transfer (default {SH_ORDER}: {SH_ORDER * SH_ORDER} coefficients)")
+    be.add_argument("--transfer", choices=TRANSFERS, default=TRANSFER, help=f"diffuse transfer (default {TRANSFER})")
+    be.add_argument("--rays", type=int, default=RAYS, metavar="R", help=f"rays per vertex (spherical Fibonacci set, default {RAYS})")
+    be.add_argument("--bounces", type=int, default=BOUNCES, metavar="B", help=f"most interreflection passes (default {BOUNCES})")
+    be.add_argument("--bounce-threshold", type=float, default=BOUNCE_THRESHOLD, metavar="T",
+                    help=f"stop when a pass' energy is below T times the direct pass' (default {BOUNCE_THRESHOLD:g})")
     be.add_argument("--rotate-rays", action="store_true", help="turn the ray set by a random rotation per vertex")
     be.add_argument("--no-glossy", action="store_true", help="skip the glossy matrices")
     be.add_argument("--glossy-order", type=int, default=None, metavar="N", help="bands of the glossy transferred radiance (default: --sh-order)")
     be.add_argument("--lod-threshold", type=float, default=None, metavar="E",
                     help="level of detail: build the vertex hierarchy and store transfer vectors only where they differ "
                     "by more than E (relative) across a node's leaves; the rest are completed on reading (T-15)")
-    be.add_argument("--device", default=None, metavar="DEV", help="Warp device: cpu, cuda, cuda:N")
-    be.add_argument("--jobs", type=int, default=None, metavar="J", help="CPU threads launching vertex ranges (default: all cores)")
-    be.add_argument("--overwrite", action="store_true", help="replace OUT if it is an existing transfer store")
+    cli_args.add_device(be)
+    cli_args.add_jobs(be, "each launching a range of vertices")
+    be.set_defaults(handler=cmd_bake_environment)
 
+
+def _add_render_environment(sub) -> None:
     re = sub.add_parser(
         "render-environment",
         help="render a transfer bake relit by an environment, optionally rotated about +y",
@@ -63,34 +85,35 @@ def add_parsers(sub) -> None:
         "(diffuse dot products, glossy matrix-vector + Phong convolution + evaluation in the reflection "
         "direction) and draw it offscreen (EGL) into a PNG.",
     )
-    re.add_argument("store", metavar="OUT.zarr")
+    cli_args.add_store(re)
     re.add_argument("--environment", default=None, metavar="ENV", help="lighting (default: the one stored by the bake); " + ENV_HELP)
     re.add_argument("--rotate", type=float, default=0.0, metavar="DEG", help="turn the environment about +y by DEG degrees")
     re.add_argument("--frames", type=int, default=1, metavar="N",
                     help="N > 1: N images turning the environment by 360/N degrees each, OUT_0000.png ... (default 1)")
-    re.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"), help="eye position")
-    re.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"), help="look-at point (default: scene centre)")
-    re.add_argument("--fov", type=float, default=40.0, metavar="DEG", help="vertical field of view (default 40)")
-    re.add_argument("--size", type=int, nargs=2, default=(800, 600), metavar=("W", "H"), help="image size in pixels")
+    cli_args.add_camera(re)
     re.add_argument("--white", type=float, default=None, metavar="L", help="radiance shown as white (default: 99th percentile of the first frame)")
-    re.add_argument("-o", "--out", required=True, metavar="img.png", help="output PNG (not replaced without --overwrite)")
-    re.add_argument("--overwrite", action="store_true", help="replace existing output")
+    cli_args.add_output(re, "img.png", "output PNG")
+    re.set_defaults(handler=cmd_render_environment)
 
 
-def _cmd_irradiance(args) -> int:
+def cmd_irradiance(args) -> int:
     from lodprt.model import irradiance as irr
     from lodprt.model.environment import load_environment
 
     env = load_environment(args.environment)
     if args.mip:
         env = env.mip(args.mip)
-    coeffs = irr.lighting_coefficients(env)
-    doc = irr.describe(coeffs)
+    doc = irr.describe(irr.lighting_coefficients(env))
     doc["environment"] = {"source": env.source, "kind": env.kind, "shape": list(env.data.shape[:-1]),
                           "mip_level": args.mip}
     if args.json:
         print(json.dumps(doc, indent=2))
         return 0
+    _print_irradiance(env, doc)
+    return 0
+
+
+def _print_irradiance(env, doc) -> None:
     print(f"{env.source}: {env.kind} {' x '.join(map(str, env.data.shape[:-1]))}, linear RGB radiance")
     print(f"{'':6}" + "".join(f"{n:>12}" for n in doc["coefficient_names"]))
     for c in "rgb":
@@ -108,42 +131,40 @@ def _cmd_irradiance(args) -> int:
     if min(lo) < 0:
         print("warning: negative irradiance somewhere (ringing of the 9-coefficient expansion of a sharp light)",
               file=sys.stderr)
-    return 0
 
 
-def _cmd_bake_environment(args) -> int:
-    from tqdm import tqdm
+def cmd_bake_environment(args) -> int:
+    return bake_environment(args.scene, args.out, environment=args.environment, sh_order=args.sh_order,
+                            transfer=args.transfer, rays=args.rays, bounces=args.bounces,
+                            bounce_threshold=args.bounce_threshold, rotate_rays=args.rotate_rays,
+                            glossy=not args.no_glossy, glossy_order=args.glossy_order,
+                            lod_threshold=args.lod_threshold, device=args.device, jobs=args.jobs,
+                            overwrite=args.overwrite)
 
+
+def bake_environment(scene_path, out, *, environment: str | None = None, sh_order: int = SH_ORDER,
+                     transfer: str = TRANSFER, rays: int = RAYS, bounces: int = BOUNCES,
+                     bounce_threshold: float = BOUNCE_THRESHOLD, rotate_rays: bool = False, glossy: bool = True,
+                     glossy_order: int | None = None, lod_threshold: float | None = None, device: str | None = None,
+                     jobs: int | None = None, overwrite: bool = False) -> int:
+    """``lodprt bake-environment`` with these values (its defaults where not given): bake, report, exit code 0."""
     from lodprt.devices import resolve_device
     from lodprt.model.environment import load_environment
     from lodprt.model.scene import load_scene
     from lodprt.precompute.transfer import bake_transfer
 
-    if args.jobs is not None and args.jobs < 1:
-        raise LodprtError(f"--jobs {args.jobs}: must be >= 1")
-    device = resolve_device(args.device)
-    env = load_environment(args.environment) if args.environment else None
-    scene = load_scene(args.scene)
+    cli_args.at_least("--jobs", jobs, 1)
+    device = resolve_device(device)
+    env = load_environment(environment) if environment else None
+    scene = load_scene(scene_path)
     print(f"scene {scene.source}: {scene.num_vertices:,} vertices, {len(scene.faces):,} triangles", file=sys.stderr)
-    bar = None
-
-    def progress(done, total):
-        nonlocal bar
-        if bar is None:
-            bar = tqdm(total=total, unit="pass", desc="transfer", file=sys.stderr)
-        bar.update(done - bar.n)
-
-    try:
-        res = bake_transfer(scene, args.out, order=args.sh_order, mode=args.transfer, rays=args.rays,
-                            bounces=args.bounces, threshold=args.bounce_threshold, glossy=not args.no_glossy,
-                            glossy_order=args.glossy_order, rotate=args.rotate_rays, environment=env, device=device,
-                            lod_threshold=args.lod_threshold, overwrite=args.overwrite, progress=progress,
-                            jobs=args.jobs)
-    finally:
-        if bar is not None:
-            bar.close()
+    with ProgressBars() as bars:
+        res = bake_transfer(scene, out, order=sh_order, mode=transfer, rays=rays, bounces=bounces,
+                            threshold=bounce_threshold, glossy=glossy, glossy_order=glossy_order, rotate=rotate_rays,
+                            environment=env, device=device, lod_threshold=lod_threshold, overwrite=overwrite,
+                            progress=bars.callback("transfer", "pass"), jobs=jobs)
     e = res.diffuse.energy
-    print(f"wrote {res.path}: order {args.sh_order} {args.transfer} transfer, {args.rays} rays/vertex, "
+    print(f"wrote {res.path}: order {sh_order} {transfer} transfer, {rays} rays/vertex, "
           f"{len(e) - 1} bounce pass(es) (energy " + ", ".join(f"{x:.3g}" for x in e) + f"), "
           f"{len(res.glossy_ids):,} glossy matrices; "
           + (f"LOD keeps {len(res.cut_nodes):,} of {scene.num_vertices:,} vertices; " if res.cut_nodes is not None else "")
@@ -152,44 +173,47 @@ def _cmd_bake_environment(args) -> int:
     return 0
 
 
-def _cmd_render_environment(args) -> int:
+def cmd_render_environment(args) -> int:
+    return render_environment(args.store, args.out, eye=args.eye, environment=args.environment, rotate=args.rotate,
+                              frames=args.frames, target=args.target, fov=args.fov, size=args.size,
+                              white=args.white, overwrite=args.overwrite)
+
+
+def render_environment(store_path, out, *, eye, environment: str | None = None, rotate: float = 0.0, frames: int = 1,
+                       target=None, fov: float = cli_args.FOV, size=cli_args.SIZE, white: float | None = None,
+                       overwrite: bool = False) -> int:
+    """``lodprt render-environment`` with these values: relight, draw and write the PNG(s), report, exit code 0."""
     import numpy as np
 
-    from lodprt.model.environment import load_environment
-    from lodprt.runtime.environment_relight import open_transfer, render_relit, rotated_lighting, save_png
+    from lodprt.display.environment_render import render_relit, save_png
+    from lodprt.runtime.environment_relight import open_transfer, rotated_lighting
 
-    out = Path(args.out)
-    if out.suffix.lower() != ".png":
-        raise LodprtError(f"{out}: the output must be a .png file")
-    if args.frames < 1:
-        raise LodprtError(f"--frames {args.frames}: must be >= 1")
-    store = open_transfer(args.store)
-    if args.environment:
-        lighting = load_environment(args.environment).project(store.order)
-    elif store.has("environment/coefficients"):
-        lighting = store.read("environment/coefficients")
-    else:
-        raise LodprtError(f"{args.store}: the bake stored no environment; pass --environment ENV")
-    paths = [out] if args.frames == 1 else [out.with_name(f"{out.stem}_{k:04d}.png") for k in range(args.frames)]
+    out = cli_args.require_suffix(out, ".png")
+    cli_args.at_least("--frames", frames, 1)
+    store = open_transfer(store_path)
+    lighting = _lighting(store, store_path, environment)
+    paths = [out] if frames == 1 else [out.with_name(f"{out.stem}_{k:04d}.png") for k in range(frames)]
     for p in paths:
-        if p.exists() and not args.overwrite:
-            raise LodprtError(f"{p}: already exists; pass --overwrite to replace it")
-    white = args.white
+        cli_args.refuse_existing(p, overwrite)
     for k, p in enumerate(paths):
-        deg = args.rotate + 360.0 * k / args.frames
-        img, rad = render_relit(store, rotated_lighting(lighting, deg), eye=args.eye, target=args.target, fov=args.fov,
-                                size=tuple(args.size), white=white)
+        deg = rotate + 360.0 * k / frames
+        img, rad = render_relit(store, rotated_lighting(lighting, deg), eye=eye, target=target, fov=fov,
+                                size=tuple(size), white=white)
         if white is None:  # keep the first frame's white for the whole sequence
             pos = rad[rad > 0]
             white = float(np.percentile(pos, 99)) if pos.size else 1.0
         save_png(p, img)
     print(f"wrote {paths[0]}" + (f" ... {paths[-1].name} ({len(paths)} frames)" if len(paths) > 1 else "")
-          + f": environment turned {args.rotate:g} deg" + (f" + 360/{args.frames} per frame" if len(paths) > 1 else ""))
+          + f": environment turned {rotate:g} deg" + (f" + 360/{frames} per frame" if len(paths) > 1 else ""))
     return 0
 
 
-COMMANDS = {
-    "irradiance": _cmd_irradiance,
-    "bake-environment": _cmd_bake_environment,
-    "render-environment": _cmd_render_environment,
-}
+def _lighting(store, store_path, environment):
+    """The lighting coefficients: of ``environment`` when given, else the ones the bake stored."""
+    from lodprt.model.environment import load_environment
+
+    if environment:
+        return load_environment(environment).project(store.order)
+    if store.has("environment/coefficients"):
+        return store.read("environment/coefficients")
+    raise LodprtError(f"{store_path}: the bake stored no environment; pass --environment ENV")

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.display.render import Renderer, auto_white, check_output, frame_source
+from lodprt.display.pictures import check_output
+from lodprt.display.render import Renderer
+from lodprt.runtime.frames import auto_white
+from lodprt.runtime.session import frame_source
 
 
 def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,

@@ -10,12 +10,12 @@ from lodprt.store.bake_store import Store, radiance_toward
 
 def full_resolution_radiance(store: Store, sample: int, eye, device: str) -> np.ndarray:
     """Re-bake ``sample`` at full resolution from the stored scene (same float32 arrays as the bake): (V, 3)."""
-    from lodprt.precompute.bake import _Baker, load_kernels
+    from lodprt.precompute.bake import Baker, load_kernels
 
     scene = store.scene()
     load_kernels(device)
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
-    baker = _Baker(scene, store.sh_order, device, ids)
+    baker = Baker(scene, store.sh_order, device, ids)
     coeffs, _ = baker.sample(store.light_positions[sample].astype(np.float64))
     full = np.zeros((store.num_vertices,) + coeffs.shape[1:], np.float64)
     full[ids] = coeffs

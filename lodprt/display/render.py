@@ -14,12 +14,12 @@ first row is its top.
 from __future__ import annotations
 
 import logging
-import time
-from pathlib import Path
 
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.runtime.camera import camera_matrices, look_at, perspective
+from lodprt.runtime.frames import auto_white
 
 log = logging.getLogger(__name__)
 
@@ -37,45 +37,6 @@ in vec3 v_col;
 out vec4 f_col;
 void main() { f_col = vec4(v_col, 1.0); }
 """
-
-
-def view_up(forward, up) -> np.ndarray:
-    """``up`` unless it is (nearly) parallel to the unit viewing direction ``forward``: then the world axis least
-    aligned with ``forward`` (looking straight down with up = +y gives -z up on screen), as viewers do; logged."""
-    up = np.asarray(up, np.float64)
-    n = np.linalg.norm(up)
-    if n > 0 and np.linalg.norm(np.cross(forward, up / n)) > 1e-6:
-        return up
-    axes = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
-    pick = axes[int(np.argmin(np.abs(axes @ forward)))]
-    log.info("camera: up %s is parallel to the viewing direction %s; using up %s", up.tolist(),
-             np.round(forward, 6).tolist(), pick.tolist())
-    return pick
-
-
-def look_at(eye, target, up) -> np.ndarray:
-    """4x4 view matrix (right-handed, camera looks down -z); an ``up`` along the view is replaced (``view_up``)."""
-    eye, target, up = (np.asarray(x, np.float64) for x in (eye, target, up))
-    f = target - eye
-    if not np.linalg.norm(f) > 0:
-        raise LodprtError("camera: eye and target coincide")
-    f /= np.linalg.norm(f)
-    s = np.cross(f, view_up(f, up))
-    s /= np.linalg.norm(s)
-    u = np.cross(s, f)
-    m = np.eye(4)
-    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m
-
-
-def perspective(fov_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
-    t = 1.0 / np.tan(np.radians(fov_deg) / 2)
-    m = np.zeros((4, 4))
-    m[0, 0], m[1, 1] = t / aspect, t
-    m[2, 2], m[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
-    m[3, 2] = -1.0
-    return m
 
 
 def fit_mvp(positions, *, eye, target, up, fov: float, size) -> np.ndarray:
@@ -338,29 +299,6 @@ void main() {  // a disc in the light's colour with a dark rim
 """
 
 
-def camera_matrices(camera, points=None) -> tuple[np.ndarray, np.ndarray]:
-    """View and projection matrices (4x4 float64) of a ``lodprt.runtime.Camera``; near/far None are chosen so
-    that ``points`` (N, 3) lie between them (a thousandth of far at the closest)."""
-    view = look_at(camera.eye, camera.target, camera.up)
-    near, far = camera.near, camera.far
-    if near is None or far is None:
-        pts = np.asarray(points if points is not None and len(points) else [camera.target], np.float64)
-        lo, hi = pts.min(0), pts.max(0)
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        depth = -(corners @ view[:3, :3].T + view[:3, 3])[:, 2]
-        f = max(float(depth.max()) * 1.01, 1e-6) if far is None else far
-        near = max(float(depth.min()) * 0.99, f * 1e-3) if near is None else near
-        far = max(f, near * 1.0001)
-    return view, perspective(camera.fov, camera.width / camera.height, near, far)
-
-
-def auto_white(radiance) -> float:
-    """The default white point: 99th percentile of the positive entries of ``radiance`` (1 when there are none)."""
-    r = np.asarray(radiance, np.float64)
-    pos = r[r > 0]
-    return float(np.percentile(pos, 99)) if pos.size else 1.0
-
-
 def _srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0), 1 / 2.4) - 0.055)
 
@@ -583,203 +521,3 @@ class Renderer:
 # Full-resolution frames straight from a store ("LOD off"): every referenced vertex, no view cut.
 
 
-def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = None):
-    """A ``lodprt.runtime.Frame`` with every referenced vertex of ``store`` and its completed coefficients.
-
-    Either ``sample`` (one light exactly at light sample K, that sample's coefficients) or ``lights`` (L, 3)
-    positions, each interpolated from its nearest samples (``lodprt.runtime.light_coefficients``: the run time's
-    T-12 weights, clamped into the sampled region). ``colors`` (L, 3) RGB
-    intensities (default the store's); the frame's coefficients carry them (linear radiance).
-    """
-    from lodprt.runtime.session import Frame, light_coefficients
-    from lodprt.store.bake_store import radiance_toward
-
-    faces = store.faces
-    ids = np.unique(faces.ravel()).astype(np.int32)
-    remap = np.full(store.num_vertices, -1, np.int64)
-    remap[ids] = np.arange(len(ids))
-    if sample is not None:
-        store.check_sample(sample)
-        lights = store.light_positions[sample][None, :].astype(np.float64)
-        colors = np.broadcast_to(store.intensity if colors is None else np.asarray(colors, np.float64),
-                                 lights.shape).astype(np.float64)
-        coeffs = store.coefficients(sample)[ids] * colors[0][None, :, None]
-    else:
-        lights = np.asarray(lights, np.float64).reshape(-1, 3)
-        if not len(lights) or not np.isfinite(lights).all():
-            raise LodprtError(f"lights: expected (L, 3) finite positions, L >= 1, got {lights.tolist()}")
-        lights, colors, coeffs = light_coefficients(store, lights, colors=colors)
-        coeffs = coeffs[ids]
-    pos = store.positions[ids].astype(np.float32)
-    nrm = store.normals[ids].astype(np.float32)
-    rad = radiance_toward(pos, nrm, coeffs, camera.eye, np.ones(3))
-    return Frame(vertex_ids=ids, positions=pos, normals=nrm, triangles=remap[faces].astype(np.int32),
-                 coefficients=coeffs.astype(np.float32), radiance=rad, lights=lights.copy(),
-                 light_colors=colors.copy(), camera=camera,
-                 stats={"triangles": len(faces), "active_nodes": len(ids), "lod": False})
-
-
-class StoreFrames:
-    """The ``Runtime`` interface (set_lights, set_camera, set_lod, set_error_bound, update) over ``full_frame``,
-    for stores baked without a hierarchy: always full resolution (no view cut)."""
-
-    lod = False
-
-    def __init__(self, store):
-        self.store = store
-        self.white = None
-        self.camera = None
-        self._lights = store.light_positions[store.num_samples // 2][None, :]
-        self._colors = None
-
-    def set_lights(self, positions, colors=None) -> None:
-        self._lights, self._colors = np.asarray(positions, np.float64).reshape(-1, 3), colors
-
-    def set_camera(self, camera) -> None:
-        self.camera = camera
-
-    def set_lod(self, enabled: bool) -> None:
-        if enabled:
-            log.warning("%s has no hierarchy: LOD is not available, showing full resolution", self.store.path)
-
-    def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
-        pass
-
-    def update(self):
-        t0 = time.perf_counter()
-        frame = full_frame(self.store, self.camera, lights=self._lights, colors=self._colors)
-        if self.white is None:
-            self.white = auto_white(frame.radiance)
-        frame.stats["ms_total"] = 1e3 * (time.perf_counter() - t0)
-        return frame
-
-
-def frame_source(store, *, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-                 criterion: str = "screen"):
-    """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut; ``lod``
-    False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution)."""
-    if store.has_hierarchy:
-        from lodprt.runtime.session import Runtime
-
-        return Runtime(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
-    if lod:
-        log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
-    return StoreFrames(store)
-
-
-def check_output(path, suffixes: tuple[str, ...], *, overwrite: bool) -> Path:
-    """The output path, refused (LodprtError naming it) for a wrong suffix, a missing folder, or an existing file
-    without ``overwrite``."""
-    path = Path(path)
-    if path.suffix.lower() not in suffixes:
-        raise LodprtError(f"{path}: the output must end in {' or '.join(suffixes)}")
-    if not path.parent.is_dir():
-        raise LodprtError(f"{path}: the folder {path.parent} does not exist")
-    if path.exists() and not overwrite:
-        raise LodprtError(f"{path}: already exists; pass --overwrite to replace it")
-    return path
-
-
-def scene_centre(store) -> tuple[float, float, float]:
-    """Centre of the bounding box of the vertices the faces use (the default look-at point)."""
-    p = store.positions[np.unique(store.faces.ravel())]
-    return tuple(float(x) for x in 0.5 * (p.min(0) + p.max(0)))
-
-
-def save_image(path, image: np.ndarray) -> None:
-    """(H, W, 3) uint8 -> PNG, or float32 linear -> .npy."""
-    path = Path(path)
-    if path.suffix.lower() == ".npy":
-        np.save(path, np.asarray(image, np.float32))
-    else:
-        from PIL import Image
-
-        Image.fromarray(np.asarray(image, np.uint8)).save(path)
-
-
-def default_eye(store) -> tuple[float, float, float]:
-    """A three-quarter view from the front (+z) and above that frames the scene at a 40-degree field of view."""
-    p = store.positions[np.unique(store.faces.ravel())]
-    c = 0.5 * (p.min(0) + p.max(0))
-    r = 0.5 * float(np.linalg.norm(p.max(0) - p.min(0))) or 1.0
-    return tuple(float(x) for x in c + r * np.array([0.5, 0.9, 1.9]))
-
-
-def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen",
-                   lod: bool = True, overwrite: bool = False, **draw) -> dict:
-    """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped,
-    .npy linear (H, W, 3) float32). ``draw`` keywords go to ``Renderer.draw``. Returns the frame's stats."""
-    out = check_output(out, (".png", ".npy"), overwrite=overwrite)
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
-    source.set_lights(lights, colors)
-    source.set_camera(camera)
-    frame = source.update()
-    linear = out.suffix.lower() == ".npy"
-    if draw.get("white") is None and not linear:
-        draw["white"] = source.white or auto_white(frame.radiance)
-    with Renderer() as renderer:
-        t0 = time.perf_counter()
-        image = renderer.image(frame, linear=linear, **draw)
-        ms = 1e3 * (time.perf_counter() - t0)
-    save_image(out, image)
-    return dict(frame.stats, ms_draw=ms, lod=bool(getattr(source, "lod", False)))
-
-
-def orbit(camera, angle: float):
-    """``camera`` turned by ``angle`` radians about the vertical (``up``) axis through its target."""
-    import dataclasses
-
-    return dataclasses.replace(camera, eye=tuple(_rotate_about(camera.eye, camera.target, camera.up, angle)))
-
-
-def _rotate_about(point, centre, axis, angle: float) -> np.ndarray:
-    """Rodrigues rotation of ``point`` about the line through ``centre`` along ``axis``."""
-    k = np.asarray(axis, np.float64) / np.linalg.norm(axis)
-    v = np.asarray(point, np.float64) - np.asarray(centre, np.float64)
-    c, s = np.cos(angle), np.sin(angle)
-    return np.asarray(centre, np.float64) + v * c + np.cross(k, v) * s + k * np.dot(k, v) * (1 - c)
-
-
-def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, light_turns: float = 1.0,
-              fps: float = 12.0, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-              criterion: str = "screen",
-              overwrite: bool = False, **draw) -> Path:
-    """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
-    turning ``light_turns`` times the other way about the same axis (clamped to the sampled light region by the
-    run time). ``out`` a folder (created; frame_0000.png, ...) or a .gif (imageio). One run time for the whole
-    orbit, so the view cut moves incrementally from frame to frame and the white point stays fixed."""
-    out = Path(out)
-    if frames < 1:
-        raise LodprtError(f"--frames {frames}: must be >= 1")
-    gif = out.suffix.lower() == ".gif"
-    if gif:
-        check_output(out, (".gif",), overwrite=overwrite)
-        import imageio.v3 as iio
-    elif out.suffix:
-        raise LodprtError(f"{out}: give a folder (PNG sequence) or a .gif path")
-    elif out.exists() and (not out.is_dir() or (any(out.iterdir()) and not overwrite)):
-        raise LodprtError(f"{out}: already exists and is not an empty folder; pass --overwrite to write into it")
-    elif not out.parent.is_dir():
-        raise LodprtError(f"{out}: the folder {out.parent} does not exist")
-    lights = np.asarray(lights, np.float64).reshape(-1, 3)
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
-    images = []
-    with Renderer() as renderer:
-        for k in range(frames):
-            a = 2 * np.pi * k / frames
-            source.set_lights([_rotate_about(p, camera.target, camera.up, -light_turns * a) for p in lights], colors)
-            source.set_camera(orbit(camera, a))
-            frame = source.update()
-            kw = dict(draw)
-            if kw.get("white") is None:
-                kw["white"] = source.white or auto_white(frame.radiance)
-            img = renderer.image(frame, **kw)
-            if gif:
-                images.append(img)
-            else:
-                out.mkdir(exist_ok=True)
-                save_image(out / f"frame_{k:04d}.png", img)
-    if gif:
-        iio.imwrite(out, np.stack(images), duration=1000.0 / fps, loop=0)
-    return out

@@ -28,7 +28,10 @@ import time
 import numpy as np
 
 from lodprt.errors import LodprtError
-from lodprt.display.render import Renderer, _rotate_about, auto_white, frame_source
+from lodprt.display.render import Renderer
+from lodprt.runtime.camera import rotate_about
+from lodprt.runtime.frames import auto_white
+from lodprt.runtime.session import frame_source
 
 log = logging.getLogger(__name__)
 
@@ -247,10 +250,10 @@ class ViewerState:
     def orbit(self, dx: float, dy: float) -> None:
         """Turn the eye about the target: dx radians about up, dy radians about the camera's right axis."""
         cam = self.camera
-        eye = _rotate_about(cam.eye, cam.target, cam.up, -dx)
+        eye = rotate_about(cam.eye, cam.target, cam.up, -dx)
         f = np.subtract(cam.target, eye)
         right = np.cross(f, cam.up)
-        new = _rotate_about(eye, cam.target, right, -dy)
+        new = rotate_about(eye, cam.target, right, -dy)
         v = new - np.asarray(cam.target)
         if abs(np.dot(v / np.linalg.norm(v), np.asarray(cam.up) / np.linalg.norm(cam.up))) < 0.995:  # stay off the pole
             eye = new

@@ -1,35 +1,10 @@
-"""Distant lighting from an environment map: lat-long images and cube maps of linear radiance (SPEC 6, I-3.2).
+"""Distant lighting from environment maps (SPEC 6): lat-long and cube maps of linear RGB radiance read from .hdr,
+.exr or .npy files, a folder of six faces or a procedural name; exact texel solid angles, SH projection (T-6), mip
+levels (I-3.2) and rotation of the lighting (P-4).
 
-Colour space
-------------
-Every texel holds **linear RGB radiance** (W sr^-1 m^-2 per channel, or any consistent unit). Nothing here applies
-or removes a gamma curve: load .hdr (Radiance RGBE) or .exr files, or .npy float arrays, never sRGB 8-bit images
-(playcanvas#547: projecting sRGB values is the classic bug).
-
-Directions (world frame, y up, the scene's frame)
--------------------------------------------------
-* **lat-long** (H, W, 3), W = 2 H: row ``i`` (first row = top) has polar angle ``theta = pi (i + 1/2) / H`` from
-  +y, column ``j`` the azimuth ``phi = 2 pi (j + 1/2) / W``, and the texel centre looks along
-  ``(sin theta cos phi, cos theta, -sin theta sin phi)``. A rotation by ``a`` about +y moves ``phi`` to
-  ``phi + a``, i.e. shifts the columns.
-* **cube** (6, N, N, 3), faces in OpenGL order +x, -x, +y, -y, +z, -z; texel (row ``r``, column ``c``) of a face has
-  ``u = 2 (c + 1/2)/N - 1`` (right), ``v = 2 (r + 1/2)/N - 1`` (down) and looks along
-  +x: (1, -v, -u), -x: (-1, -v, u), +y: (u, 1, v), -y: (u, -1, -v), +z: (u, -v, 1), -z: (-u, -v, -1)
-  (the OpenGL cube-map table, so a cube map made for OpenGL reads as is).
-
-Exact solid angles
-------------------
-lat-long texel: ``dphi (cos theta_top - cos theta_bottom)``. Cube texel spanning ``[u0, u1] x [v0, v1]`` on the
-face plane at distance 1: ``F(u0,v0) - F(u0,v1) - F(u1,v0) + F(u1,v1)`` with ``F(u, v) = atan2(u v,
-sqrt(u^2 + v^2 + 1))`` (the integral of the solid-angle density ``(1 + u^2 + v^2)^(-3/2)``). Both sum to 4 pi to
-rounding, at every resolution, so a constant environment projects exactly.
-
-Mip levels (I-3.2)
-------------------
-Level ``k`` halves the resolution ``k`` times with a 2 x 2 box filter weighted by the texels' solid angles (the
-four children of a texel cover exactly its solid angle, so total power and the constant coefficient are kept
-exactly). The paper projects from the 64 x 64 level of a 256 x 256 map; :func:`mip_projections` reports the time
-and the coefficient error of every level against the full-resolution projection.
+Texels hold **linear** radiance: nothing here applies or removes a gamma curve, and 8-bit (sRGB) images are refused
+(playcanvas#547: projecting sRGB values is the classic bug). Directions are in the world frame, y up
+(:func:`texel_directions`). Details and accuracy: docs/ENVIRONMENT.md, "Environment maps".
 """
 
 from __future__ import annotations
@@ -99,7 +74,8 @@ class Environment:
         return self.radiance().T @ projection_weights(self.kind, self.resolution, order, supersample)
 
     def mip(self, level: int) -> "Environment":
-        """The map downsampled ``level`` times by the solid-angle-weighted 2 x 2 box filter."""
+        """The map downsampled ``level`` times by the solid-angle-weighted 2 x 2 box filter (I-3.2): the four
+        children of a texel cover exactly its solid angle, so total power and the constant coefficient are kept."""
         env = self
         for _ in range(int(level)):
             env = env._half()
@@ -116,7 +92,7 @@ class Environment:
 
     def lookup(self, dirs) -> np.ndarray:
         """Radiance of the texel each direction falls in (nearest texel): dirs (..., 3) -> (..., 3) float64."""
-        d = sh._unit(dirs)
+        d = sh.unit_vectors(dirs)
         if self.kind == "latlong":
             h, w = self.data.shape[:2]
             theta = np.arccos(np.clip(d[..., 1], -1.0, 1.0))
@@ -146,7 +122,16 @@ class Environment:
 
 
 def texel_directions(kind: str, resolution: int) -> np.ndarray:
-    """(T, 3) float64 unit directions of texel centres of a ``kind`` map (module docstring)."""
+    """(T, 3) float64 unit directions of texel centres of a ``kind`` map, texels in ``data`` order.
+
+    * ``latlong`` (H, W, 3), W = 2 H: row ``i`` (first row = top) has polar angle ``theta = pi (i + 1/2) / H`` from
+      +y, column ``j`` the azimuth ``phi = 2 pi (j + 1/2) / W``; the texel looks along
+      ``(sin theta cos phi, cos theta, -sin theta sin phi)``, so a rotation by ``a`` about +y shifts the columns.
+    * ``cube`` (6, N, N, 3), faces in OpenGL order +x, -x, +y, -y, +z, -z; texel (row ``r``, column ``c``) has
+      ``u = 2 (c + 1/2)/N - 1`` (right), ``v = 2 (r + 1/2)/N - 1`` (down) and looks along
+      +x: (1, -v, -u), -x: (-1, -v, u), +y: (u, 1, v), -y: (u, -1, -v), +z: (u, -v, 1), -z: (-u, -v, -1)
+      (the OpenGL cube-map table, so a cube map made for OpenGL reads as is).
+    """
     n = int(resolution)
     if kind == "latlong":
         theta = np.pi * (np.arange(n) + 0.5) / n
@@ -167,7 +152,12 @@ def texel_directions(kind: str, resolution: int) -> np.ndarray:
 
 
 def texel_solid_angles(kind: str, resolution: int) -> np.ndarray:
-    """(T,) float64 exact texel solid angles of a ``kind`` map, in ``texel_directions`` order; they sum to 4 pi."""
+    """(T,) float64 exact texel solid angles of a ``kind`` map, in ``texel_directions`` order; they sum to 4 pi.
+
+    Lat-long texel: ``dphi (cos theta_top - cos theta_bottom)``. Cube texel ``[u0, u1] x [v0, v1]`` on the face
+    plane at distance 1: ``F(u0,v0) - F(u0,v1) - F(u1,v0) + F(u1,v1)``, ``F(u, v) = atan2(u v, sqrt(u^2 + v^2 + 1))``
+    (the integral of the solid-angle density ``(1 + u^2 + v^2)^(-3/2)``).
+    """
     n = int(resolution)
     if kind == "latlong":
         edges = np.pi * np.arange(n + 1) / n
@@ -324,7 +314,7 @@ def sky_radiance(dirs, *, sun: float = 2.0, sun_exponent: float = 32.0) -> np.nd
     dirs (..., 3) -> (..., 3) float64 linear RGB radiance. Smooth everywhere (no hard horizon), so a 9-coefficient
     irradiance reproduces it to about 0.5% mean, 2% worst (Ramamoorthi-Hanrahan: about 1%, under 5%).
     """
-    d = sh._unit(dirs)
+    d = sh.unit_vectors(dirs)
     y = d[..., 1:2]
     zenith = np.array([0.25, 0.45, 1.0])
     horizon = np.array([0.9, 0.85, 0.8])
@@ -347,7 +337,7 @@ SPOTS = (
 
 def spots_radiance(dirs) -> np.ndarray:
     """A dim ambient and a few area-like hot spots ``C exp((d.c - 1)/w)``: dirs (..., 3) -> (..., 3) float64."""
-    d = sh._unit(dirs)
+    d = sh.unit_vectors(dirs)
     out = np.full(d.shape[:-1] + (3,), 0.2)
     for c, col, w in SPOTS:
         c = c / np.linalg.norm(c)

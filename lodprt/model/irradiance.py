@@ -1,32 +1,10 @@
 """Irradiance environment maps with 9 SH coefficients (Ramamoorthi & Hanrahan 2001; seed 002, I-4..I-7).
 
-With ``L_lm`` the order-3 (l <= 2) SH coefficients of the environment's radiance (lodprt's convention,
-``lodprt.model.sh``: y_1 = sqrt(3/4pi) (y, z, x), no Condon-Shortley phase), the irradiance at unit normal ``n`` is
-
-    E(n) = sum_{l<=2} A_l L_lm y_lm(n),      A_0 = pi, A_1 = 2 pi/3, A_2 = pi/4                      (I-6)
-
-(the A_l are the clamped-cosine kernel's convolution factors sqrt(4pi/(2l+1)) h_l, P-6). The outgoing radiance of a
-Lambertian surface of albedo ``kd`` is ``kd E(n) / pi``. The same E is a quadratic form (R-H, eq. 12):
-
-    E(n) = n^T M n,  n = (x, y, z, 1),
-    M = [[ c1 L22,  c1 L2-2, c1 L21, c2 L11],
-         [ c1 L2-2, -c1 L22, c1 L2-1, c2 L1-1],
-         [ c1 L21,  c1 L2-1, c3 L20, c2 L10],
-         [ c2 L11,  c2 L1-1, c2 L10, c4 L00 - c5 L20]]
-
-with the table-1 constants c1 = 0.429043, c2 = 0.511664, c3 = 0.743125, c4 = 0.886227, c5 = 0.247708, derived
-here in float64 from A_l and the SH normalisations (within one unit of the printed sixth digit: the exact c2, c3
-round to 0.511663, 0.743124; the tests check it). The seed's GPU variant
-(I-7, its table 1) packs the same polynomial for three channels into 7 vec4 constant registers
-``cAr cAg cAb cBr cBg cBb cC``:
-
-    E_c(n) = cA_c . (x, y, z, 1) + cB_c . (xy, yz, z^2, zx) + cC_c (x^2 - y^2)
-
-with cA = (k1 L11, k1 L1-1, k1 L10, k0 L00 - k3 L20), cB = (k2 L2-2, k2 L2-1, 3 k3 L20, k2 L21), cC = k4 L22 and
-k0 = A0 n0, k1 = A1 n1, k2 = A2 n2, k3 = A2 n3, k4 = A2 n4 (n0..n4 the y_lm normalisations 1/(2 sqrt pi),
-sqrt3/(2 sqrt pi), sqrt15/(2 sqrt pi), sqrt5/(4 sqrt pi), sqrt15/(4 sqrt pi)). (The seed's eq. 7 prints
-``c_0 R_1^0``; its table, and the algebra, have ``R_0^0``.) :data:`GLSL_IRRADIANCE` evaluates exactly this in a
-shader; :func:`irradiance_gl` runs it through moderngl (EGL offscreen) for tests and pictures.
+E(n) = sum_{l<=2} A_l L_lm y_lm(n) (I-6) from the order-3 lighting coefficients, evaluated three ways: the SH sum,
+the quadratic form n^T M n (R-H eq. 12, table-1 constants c1..c5 derived in float64) and the seed's 7 vec4 shader
+registers (I-7, its table 1); plus a brute-force integral and the range of E over the sphere. A Lambertian surface
+of albedo kd leaves kd E / pi. Formulas and constants: docs/ENVIRONMENT.md, "Irradiance environment maps". The
+GLSL version of the register polynomial is :mod:`lodprt.display.irradiance_render`.
 """
 
 from __future__ import annotations
@@ -124,11 +102,12 @@ def shader_constants(coeffs) -> dict[str, np.ndarray]:
     return {k: out[k] for k in REGISTERS}
 
 
-def _normals(normals) -> np.ndarray:
+def unit_normals(normals) -> np.ndarray:
+    """(..., 3) float64 unit normals (a zero vector reads as +z); LodprtError on a wrong shape."""
     n = np.asarray(normals, np.float64)
     if n.ndim < 1 or n.shape[-1] != 3:
         raise LodprtError(f"irradiance: normals must have shape (..., 3), got {n.shape}")
-    return sh._unit(n)
+    return sh.unit_vectors(n)
 
 
 def irradiance(normals, coeffs, *, method: str = "matrix") -> np.ndarray:
@@ -137,7 +116,7 @@ def irradiance(normals, coeffs, *, method: str = "matrix") -> np.ndarray:
     method: ``matrix`` (n^T M n), ``sh`` (sum A_l L_lm y_lm(n)) or ``registers`` (the seed's 7 vec4 constants);
     all three are the same polynomial (tested).
     """
-    n = _normals(normals)
+    n = unit_normals(normals)
     L = _check9(coeffs)
     if method == "sh":
         return sh.basis(n, 3) @ irradiance_coefficients(L).T
@@ -156,7 +135,7 @@ def irradiance(normals, coeffs, *, method: str = "matrix") -> np.ndarray:
 
 def brute_force_irradiance(env, normals, *, chunk: int = 256) -> np.ndarray:
     """E(n) = sum_t L_t max(n . d_t, 0) Omega_t over every texel of ``env``: normals (N, 3) -> (N, 3) float64."""
-    n = _normals(normals).reshape(-1, 3)
+    n = unit_normals(normals).reshape(-1, 3)
     d = env.directions()
     lw = env.radiance() * env.solid_angles()[:, None]
     out = np.empty((len(n), 3))
@@ -198,135 +177,3 @@ def describe(coeffs) -> dict:
         "matrices": {c: m.tolist() for c, m in zip("rgb", quadratic_matrices(L))},
         "registers": {k: v.tolist() for k, v in shader_constants(L).items()} if len(L) == 3 else None,
     }
-
-
-# -- GLSL -------------------------------------------------------------------------------------------------------
-
-#: GLSL 330 function ``vec3 irradiance(vec3 n)`` over the seed's 7 registers (uniforms of the same names)
-GLSL_IRRADIANCE = """
-uniform vec4 cAr; uniform vec4 cAg; uniform vec4 cAb;
-uniform vec4 cBr; uniform vec4 cBg; uniform vec4 cBb;
-uniform vec4 cC;
-vec3 irradiance(vec3 n) {
-    vec4 a = vec4(n, 1.0);
-    vec3 e1 = vec3(dot(cAr, a), dot(cAg, a), dot(cAb, a));          // constant and linear terms
-    vec4 b = n.xyzz * n.yzzx;                                         // (xy, yz, z^2, zx)
-    vec3 e2 = vec3(dot(cBr, b), dot(cBg, b), dot(cBb, b));          // four quadratic terms
-    vec3 e3 = cC.rgb * (n.x * n.x - n.y * n.y);                       // the last one
-    return e1 + e2 + e3;
-}
-"""
-
-_POINTS_VS = (
-    "#version 330\n"
-    + GLSL_IRRADIANCE
-    + """
-uniform ivec2 grid;
-in vec3 in_normal;
-out vec3 v_e;
-void main() {
-    int k = gl_VertexID;
-    vec2 px = vec2(k % grid.x, k / grid.x) + 0.5;
-    gl_Position = vec4(2.0 * px / vec2(grid) - 1.0, 0.0, 1.0);
-    gl_PointSize = 1.0;
-    v_e = irradiance(normalize(in_normal));
-}
-"""
-)
-_POINTS_FS = """
-#version 330
-in vec3 v_e;
-out vec4 f_col;
-void main() { f_col = vec4(v_e, 1.0); }
-"""
-
-
-def _set_registers(prog, coeffs) -> None:
-    for name, value in shader_constants(coeffs).items():
-        if name in prog:
-            prog[name].value = tuple(float(x) for x in value)
-
-
-def irradiance_gl(normals, coeffs) -> np.ndarray:
-    """E(n) evaluated by :data:`GLSL_IRRADIANCE` on the GPU (moderngl, EGL): normals (N, 3) -> (N, 3) float32.
-
-    Each normal is drawn as one point into its own pixel of a float32 framebuffer and read back.
-    """
-    n = _normals(normals).reshape(-1, 3).astype(np.float32)
-    if len(n) == 0:
-        return np.zeros((0, 3), np.float32)
-    from lodprt.display.render import create_context
-
-    width = min(len(n), 1024)
-    height = -(-len(n) // width)
-    ctx = create_context()
-    try:
-        prog = ctx.program(vertex_shader=_POINTS_VS, fragment_shader=_POINTS_FS)
-        _set_registers(prog, coeffs)
-        prog["grid"].value = (width, height)
-        vbo = ctx.buffer(n.tobytes())
-        vao = ctx.vertex_array(prog, [(vbo, "3f", "in_normal")])
-        tex = ctx.texture((width, height), 4, dtype="f4")
-        fbo = ctx.framebuffer(color_attachments=[tex])
-        fbo.use()
-        fbo.clear(0.0, 0.0, 0.0, 0.0)
-        vao.render(mode=ctx.POINTS, vertices=len(n))
-        img = np.frombuffer(tex.read(), np.float32).reshape(height, width, 4)
-        return img.reshape(-1, 4)[: len(n), :3].copy()
-    finally:
-        ctx.release()
-
-
-_SHADE_VS = (
-    "#version 330\n"
-    + GLSL_IRRADIANCE
-    + """
-uniform mat4 mvp;
-uniform float exposure;
-in vec3 in_pos;
-in vec3 in_normal;
-in vec3 in_albedo;
-out vec3 v_col;
-void main() {
-    gl_Position = mvp * vec4(in_pos, 1.0);
-    v_col = exposure * in_albedo * irradiance(normalize(in_normal)) / 3.14159265358979;  // kd E / pi
-}
-"""
-)
-_SHADE_FS = """
-#version 330
-in vec3 v_col;
-out vec4 f_col;
-void main() {
-    vec3 x = clamp(v_col, 0.0, 1.0);                                   // display white = 1 / exposure
-    vec3 s = mix(12.92 * x, 1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, x));
-    f_col = vec4(s, 1.0);
-}
-"""
-
-
-def render_irradiance(positions, triangles, normals, coeffs, *, albedo=(0.8, 0.8, 0.8), eye, target,
-                      up=(0.0, 1.0, 0.0), fov=40.0, size=(800, 600), exposure=1.0,
-                      background=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Render a diffuse mesh lit by the 9-coefficient irradiance, evaluated per vertex in the GLSL shader.
-
-    positions, normals (V, 3); triangles (M, 3); albedo (3,) or (V, 3); radiance ``kd E / pi`` is scaled by
-    ``exposure``, clipped to [0, 1] and sRGB-encoded in the fragment shader. Returns (H, W, 3) uint8, first row
-    on top; camera as in :func:`lodprt.render.render`.
-    """
-    from lodprt.display.render import check_size, create_context, draw_mesh, fit_mvp
-
-    size = check_size(size)
-    pos = np.asarray(positions, np.float32)
-    nrm = np.asarray(normals, np.float32)
-    alb = np.broadcast_to(np.asarray(albedo, np.float32), pos.shape).astype(np.float32)
-    mvp = fit_mvp(pos, eye=eye, target=target, up=up, fov=fov, size=size)
-    ctx = create_context()
-    try:
-        prog = ctx.program(vertex_shader=_SHADE_VS, fragment_shader=_SHADE_FS)
-        _set_registers(prog, coeffs)
-        prog["exposure"].value = float(exposure)
-        return draw_mesh(prog, np.hstack([pos, nrm, alb]), ("3f 3f 3f", "in_pos", "in_normal", "in_albedo"),
-                         triangles, mvp, size, background)
-    finally:
-        ctx.release()

@@ -336,8 +336,13 @@ def _lights(where: str, table: dict, bounds: np.ndarray, diagonal: float) -> Lig
 # assembly
 
 
-def _assemble(objects, floor, light_table, where_lights, source, *, wheres=None, origins=None) -> Scene:
-    """objects: list of (name, positions, faces, Material); floor: None or (resolution, margin, Material).
+def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=None, origins=None) -> Scene:
+    """Build a :class:`Scene` from meshes already in memory: what every scene reader ends with.
+
+    objects: list of (name, positions (V, 3), faces (F, 3), Material), concatenated in this order; floor: None or
+    (resolution, margin, Material), a floor under the objects added last (:func:`floor_mesh`); light_table: the
+    ``[lights]`` table of a scene file (docs/SCENE.md; ``{}`` for the defaults), named ``where_lights`` in
+    messages; source: what the scene is called (``Scene.source``).
 
     Messages about object ``k`` start with ``wheres[k]`` (default ``"{source}: object[k] (name ...)"``) and call
     its mesh ``origins[k]`` (default "its mesh"). Raises SceneError when an object has no face of non-zero area:
@@ -419,7 +424,8 @@ def demo_scene(*, floor_resolution: int = 200) -> Scene:
     else:
         pos, faces = _procedural_mesh()
         name, source = "torus", "demo (procedural torus)"
-    return _assemble([(name, pos, faces, THESIS_MATERIAL)], (floor_resolution, 1.0, THESIS_MATERIAL), {}, "demo.lights", source)
+    return assemble_scene([(name, pos, faces, THESIS_MATERIAL)], (floor_resolution, 1.0, THESIS_MATERIAL), {},
+                          "demo.lights", source)
 
 
 def _object(path: Path, k: int, table) -> tuple[tuple, str]:
@@ -479,7 +485,7 @@ def scene_from_toml(path: str | os.PathLike) -> Scene:
         objects.append(obj)
         wheres.append(where)
         origins.append(table["mesh"])
-    return _assemble(objects, floor, lights, f"{path}: lights", str(path), wheres=wheres, origins=origins)
+    return assemble_scene(objects, floor, lights, f"{path}: lights", str(path), wheres=wheres, origins=origins)
 
 
 def load_scene(spec: str | os.PathLike) -> Scene:
@@ -490,7 +496,7 @@ def load_scene(spec: str | os.PathLike) -> Scene:
     if path.suffix.lower() == ".toml":
         return scene_from_toml(path)
     pos, faces = load_mesh(path)
-    return _assemble(
+    return assemble_scene(
         [(path.stem, pos, faces, THESIS_MATERIAL)], None, {}, f"{path}: lights", str(path), wheres=[str(path)],
         origins=["the mesh"],
     )

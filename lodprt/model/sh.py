@@ -1,4 +1,5 @@
-"""Real spherical harmonics: float64 numpy reference (T-5..T-8, P-4, P-6).
+"""Real spherical harmonics, float64 numpy reference (T-5..T-8, P-4, P-6): basis, quadrature projection and
+reconstruction, clamped cosine-power lobes, zonal convolution, band windows, rotation. Summary in docs/THEORY.md.
 
 Convention, written down once for all of lodprt
 -----------------------------------------------
@@ -11,30 +12,6 @@ Directions are unit (x, y, z) vectors (normalised here); theta is measured from 
     K_l^m = sqrt((2l+1)/(4 pi) (l-|m|)!/(l+|m|)!)
 
 No Condon-Shortley phase: y_0 = 1/sqrt(4 pi), (y_1^{-1}, y_1^0, y_1^1) = sqrt(3/(4 pi)) (y, z, x).
-
-How the basis is evaluated (no factorial is ever formed, nothing divides by sin(theta))
----------------------------------------------------------------------------------------
-y_l^{+-m} = sqrt(2) Q_l^m(z) * {Re, Im} (x + i y)^m, because sin^m(theta) cos(m phi) = Re (x + i y)^m and
-sin^m(theta) sin(m phi) = Im (x + i y)^m; (x + i y)^m comes from the Cartesian recurrence
-(x + i y)^m = (x + i y)^{m-1} (x + i y).  Q_l^m = K_l^m P_l^m / sin^m(theta) is the fully normalised associated
-Legendre function without its sin^m factor (Holmes-Featherstone normalisation):
-
-    Q_0^0 = 1/sqrt(4 pi),   Q_m^m = Q_{m-1}^{m-1} sqrt((2m+1)/(2m)),   Q_{m+1}^m = sqrt(2m+3) z Q_m^m,
-    Q_l^m = a_lm (z Q_{l-1}^m - b_lm Q_{l-2}^m),  a_lm = sqrt((4l^2-1)/(l^2-m^2)),
-                                                  b_lm = sqrt(((l-1)^2-m^2)/(4(l-1)^2-1)).
-
-Near the poles that three-term recurrence (whose characteristic roots merge at z = +-1) amplifies the rounding of z
-by ~l^2: about 1e-5 absolute at l = 15 in float32.  It is therefore run in Reinsch's difference form, which is
-algebraically identical: with g_l = K_l^m / K_{l-1}^m = sqrt((2l+1)(l-m) / ((2l-1)(l+m))) and
-e_l = Q_l^m - g_l Q_{l-1}^m,
-
-    e_m = Q_m^m,
-    e_l = g_l / (l-m) * ((l+m-1) e_{l-1} - (2l-1) (1 - t) Q_{l-1}^m),     Q_l^m = g_l Q_{l-1}^m + e_l,
-
-evaluated at t = |z| with 1 - t = (x^2 + y^2) / (1 + t) (no cancellation at the poles), and
-Q_l^m(z) = (-1)^(l-m) Q_l^m(|z|) for z < 0.  (Substituting e_l into the a_lm, b_lm recurrence gives the same
-Q_l^m; the m = l + 1 step reproduces Q_{m+1}^m = sqrt(2m+3) z Q_m^m.)  The float32 Warp version
-(``lodprt.kernels.sh``) runs the very same steps; the basis agrees with scipy to 1e-12 up to l = 100 in float64.
 """
 
 from __future__ import annotations
@@ -72,8 +49,8 @@ def _order_of(n_coeffs: int, who: str) -> int:
     return order
 
 
-def _unit(directions) -> np.ndarray:
-    """(..., 3) float64 unit vectors; a zero vector reads as +z."""
+def unit_vectors(directions) -> np.ndarray:
+    """(..., 3) float64 unit vectors; a zero vector reads as +z. ValueError on a wrong shape or non-finite entries."""
     d = np.asarray(directions, dtype=np.float64)
     if d.ndim < 1 or d.shape[-1] != 3:
         raise ValueError(f"directions must have shape (..., 3), got {d.shape}")
@@ -86,6 +63,28 @@ def _unit(directions) -> np.ndarray:
     return np.where(big > 0, d / np.where(n > 0, n, 1.0), np.array([0.0, 0.0, 1.0]))
 
 
+# How the basis is evaluated (no factorial is ever formed, nothing divides by sin(theta)):
+# y_l^{+-m} = sqrt(2) Q_l^m(z) * {Re, Im} (x + i y)^m, because sin^m(theta) cos(m phi) = Re (x + i y)^m and
+# sin^m(theta) sin(m phi) = Im (x + i y)^m; (x + i y)^m comes from the Cartesian recurrence
+# (x + i y)^m = (x + i y)^{m-1} (x + i y).  Q_l^m = K_l^m P_l^m / sin^m(theta) is the fully normalised associated
+# Legendre function without its sin^m factor (Holmes-Featherstone normalisation):
+#
+#     Q_0^0 = 1/sqrt(4 pi),   Q_m^m = Q_{m-1}^{m-1} sqrt((2m+1)/(2m)),   Q_{m+1}^m = sqrt(2m+3) z Q_m^m,
+#     Q_l^m = a_lm (z Q_{l-1}^m - b_lm Q_{l-2}^m),  a_lm = sqrt((4l^2-1)/(l^2-m^2)),
+#                                                   b_lm = sqrt(((l-1)^2-m^2)/(4(l-1)^2-1)).
+#
+# Near the poles that three-term recurrence (whose characteristic roots merge at z = +-1) amplifies the rounding of z
+# by ~l^2: about 1e-5 absolute at l = 15 in float32.  It is therefore run in Reinsch's difference form, which is
+# algebraically identical: with g_l = K_l^m / K_{l-1}^m = sqrt((2l+1)(l-m) / ((2l-1)(l+m))) and
+# e_l = Q_l^m - g_l Q_{l-1}^m,
+#
+#     e_m = Q_m^m,
+#     e_l = g_l / (l-m) * ((l+m-1) e_{l-1} - (2l-1) (1 - t) Q_{l-1}^m),     Q_l^m = g_l Q_{l-1}^m + e_l,
+#
+# evaluated at t = |z| with 1 - t = (x^2 + y^2) / (1 + t) (no cancellation at the poles), and
+# Q_l^m(z) = (-1)^(l-m) Q_l^m(|z|) for z < 0.  (Substituting e_l into the a_lm, b_lm recurrence gives the same
+# Q_l^m; the m = l + 1 step reproduces Q_{m+1}^m = sqrt(2m+3) z Q_m^m.)  The float32 Warp version
+# (``lodprt.kernels.sh``) runs the very same steps; the basis agrees with scipy to 1e-12 up to l = 100 in float64.
 def basis(directions, order: int) -> np.ndarray:
     """Real SH basis y_i(d), i < order^2 (T-5): directions (..., 3) -> (..., order^2) float64.
 
@@ -93,7 +92,7 @@ def basis(directions, order: int) -> np.ndarray:
     or order < 1.  Accurate to ~1e-13 absolute up to l = 100 (tested against scipy), stable at the poles.
     """
     order = _check_order(order)
-    d = _unit(directions)
+    d = unit_vectors(directions)
     x, y, z = d[..., 0], d[..., 1], d[..., 2]
     t = np.abs(z)
     one_minus_t = (x * x + y * y) / (1.0 + t)  # 1 - |z| without cancellation near the poles
@@ -107,7 +106,7 @@ def basis(directions, order: int) -> np.ndarray:
             qmm = qmm * np.sqrt((2.0 * m + 1.0) / (2.0 * m))
         q, e, sign = qmm, qmm, np.ones_like(x)
         for l in range(m, order):
-            if l > m:  # Reinsch difference form of the normalised recurrence (module docstring)
+            if l > m:  # Reinsch difference form of the normalised recurrence (comment above)
                 g = np.sqrt((2.0 * l + 1.0) * (l - m) / ((2.0 * l - 1.0) * (l + m)))
                 e = g / (l - m) * ((l + m - 1.0) * e - (2.0 * l - 1.0) * one_minus_t * q)
                 q = g * q + e
@@ -216,8 +215,11 @@ def _band_of_index(order: int) -> np.ndarray:
     return np.repeat(np.arange(order), 2 * np.arange(order) + 1)
 
 
-def _zonal_scale(h: np.ndarray) -> np.ndarray:
-    """sqrt(4 pi/(2l+1)) h_l spread over the (2l+1) coefficients of each band (P-6)."""
+def zonal_scale(h: np.ndarray) -> np.ndarray:
+    """sqrt(4 pi/(2l+1)) h_l spread over the (2l+1) coefficients of each band (P-6): (order,) -> (order^2,).
+
+    Multiplying SH coefficients by it convolves them with the zonal kernel of coefficients ``h`` (:func:`convolve_zonal`).
+    """
     order = len(h)
     bands = np.arange(order)
     return (np.sqrt(4.0 * np.pi / (2 * bands + 1)) * h)[_band_of_index(order)]
@@ -229,7 +231,7 @@ def cosine_power_lobe(axis, shininess: float, order: int) -> np.ndarray:
     The zonal lobe about +z rotated to ``axis`` (P-4 for a zonal function, i.e. P-6 with a delta at the axis):
     f_lm = sqrt(4 pi/(2l+1)) z_l y_lm(axis), z_l = cosine_power_zonal(n, order).  ``axis`` is normalised.
     """
-    return basis(axis, order) * _zonal_scale(cosine_power_zonal(shininess, order))
+    return basis(axis, order) * zonal_scale(cosine_power_zonal(shininess, order))
 
 
 def lobe_energy_captured(shininess: float, order: int) -> float:
@@ -255,7 +257,7 @@ def convolve_zonal(coeffs, kernel_zonal) -> np.ndarray:
         raise ValueError(f"convolve_zonal: kernel_zonal must have shape (order,), got {h.shape}")
     if coeffs.ndim < 1 or coeffs.shape[-1] != len(h) ** 2:
         raise ValueError(f"convolve_zonal: coeffs {coeffs.shape} do not hold {len(h)}**2 coefficients for a kernel of {len(h)} bands")
-    return coeffs * _zonal_scale(h)
+    return coeffs * zonal_scale(h)
 
 
 def window(order: int, kind: str = "hann") -> np.ndarray:

@@ -1,14 +1,10 @@
-"""Full-resolution local PRT bake (SPEC 4 without the cut): per light sample, visibility -> Phong -> SH -> store.
+"""Point-light local PRT bake (SPEC 4; thesis 2.2): per light sample, shadow rays -> Phong radiance projected on SH
+over the view direction (T-6, closed-form specular lobe P-6) -> store; optionally only on the light cut (thesis
+figure 8, :mod:`lodprt.precompute.light_cut`).
 
-Light samples are independent tasks: each one gets its own device arrays and touches no other sample's state.
-On the CPU, Warp runs a launch on one thread but releases the GIL, so samples run on ``jobs`` Python threads
-(default: every core, at most the number of samples); on CUDA they run one after another on the device.
-
-What the scene does not need is left out:
-  * no shadow ray for a vertex facing away from the light (visibility state BACK_FACING);
-  * one coefficient per vertex (y_0 only) when no material has a specular term;
-  * one channel when every material is grey; the light's RGB intensity is applied when reading;
-  * vertices that no face references are never baked.
+Samples are independent tasks (``jobs`` Python threads on the CPU, where a Warp launch releases the GIL; one after
+another on CUDA). Left out: shadow rays of back-facing vertices, specular bands when no material has ks > 0, colour
+channels when every material is grey (the light's RGB intensity is applied when reading), unreferenced vertices.
 """
 
 from __future__ import annotations
@@ -24,9 +20,10 @@ from typing import Callable
 
 import numpy as np
 
-from lodprt.model import sh
 from lodprt.devices import resolve_device, warp
 from lodprt.errors import LodprtError
+from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
+from lodprt.model import sh
 from lodprt.model.scene import Scene
 from lodprt.store.bake_store import FORMAT_NAME, FORMAT_VERSION, StoreWriter, sample_group
 
@@ -79,8 +76,14 @@ def material_tables(scene: Scene, sh_order: int, channels: int) -> dict[str, np.
     return {"kd": kd, "ks": ks, "shininess": n, "zonal": zonal}
 
 
-class _Baker:
-    """Device-side state of one bake: the BVH and the per-sample work, shared read-only between threads."""
+class Baker:
+    """Device-side state of one bake of ``scene``: the BVH, the material tables and the per-sample work.
+
+    ``ids`` (K,) are the vertices to bake (``bake`` passes every referenced vertex). The state is shared read-only
+    between threads; each thread gets its own work arrays, so :meth:`sample` and :meth:`visibility` may run on
+    several threads at once. Call :func:`load_kernels` on ``device`` first when threads will launch.
+    ``ncoef`` and ``channels`` are the layout of the coefficients (:func:`layout`), ``offset`` the ray offset.
+    """
 
     def __init__(self, scene: Scene, sh_order: int, device: str, ids: np.ndarray):
         from lodprt.kernels import sh as ksh
@@ -180,7 +183,7 @@ class _Baker:
         wp = self.wp
         vis = self.visibility(light).numpy().copy()
         V = self.points.shape[0]
-        full = np.full(V, 2, np.uint8)  # vertices no face uses: dark, never kept
+        full = np.full(V, BACK_FACING, np.uint8)  # vertices no face uses: dark, never kept
         full[self.ids_host] = vis
         active, dark = lightcut.cut(self.normals, wp.array(full, dtype=wp.uint8, device=self.device), light, threshold_deg)
         nodes = np.flatnonzero(active)
@@ -234,7 +237,7 @@ def bake(
 
     ``threshold_deg=None`` bakes every referenced vertex (full resolution); a number bakes, per sample, only the
     vertices of the light-dependent cut with that incident-angle threshold (``lodprt.precompute.light_cut``; needs the hierarchy).
-    With ``hierarchy`` the vertex hierarchy (``lodprt.model.hierarchy``) is built first (or ``tree`` is used) and
+    With ``hierarchy`` the vertex hierarchy (``lodprt.model.hierarchy_build``) is built first (or ``tree`` is used) and
     stored under ``hierarchy/``.
     ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample,
     ``hierarchy_progress(collapses, total)`` while the hierarchy is built.
@@ -247,55 +250,23 @@ def bake(
         )
     writer = StoreWriter(out, overwrite=overwrite) if out is not None else None
     try:
+        # plan: kernels, device arrays, the scene and the hierarchy
         load_seconds = load_kernels(device)
         t0 = time.perf_counter()
         ids = np.flatnonzero(scene.referenced).astype(np.int32)
-        baker = _Baker(scene, sh_order, device, ids)
-        lights = scene.lights.positions
-        if jobs is None:
-            jobs = (os.cpu_count() or 1) if device == "cpu" else 1
-        jobs = max(1, min(jobs, len(lights)))
+        baker = Baker(scene, sh_order, device, ids)
         if writer is not None:
             _write_scene(writer, scene, baker)
         hierarchy_seconds = None
         if hierarchy:
-            from lodprt.model.hierarchy import build_hierarchy
-
-            t_h = time.perf_counter()
-            if tree is None:
-                tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=hierarchy_progress)
-            hierarchy_seconds = time.perf_counter() - t_h
-            if writer is not None:
-                for name, arr in tree.to_arrays().items():
-                    writer.array(f"hierarchy/{name}", arr, chunk_rows=1 << 18)
-                writer.attrs("hierarchy", levels=tree.levels, seconds=hierarchy_seconds, roots=int(len(tree.roots)),
-                             depth=tree.depth)
-        samples: list[dict] = [{} for _ in lights]
+            tree, hierarchy_seconds = _hierarchy(scene, tree, writer, hierarchy_progress)
         lightcut = None
         if threshold_deg is not None:
             from lodprt.precompute.light_cut import LightCut
 
             lightcut = LightCut(tree, baker.points, device)
-
-        def run(k: int):
-            t = time.perf_counter()
-            extra = {}
-            if lightcut is None:
-                coeffs, visible = baker.sample(lights[k])
-                kept = ids
-            else:
-                kept, nodes, dark, coeffs, visible = baker.sample_cut(lights[k], lightcut, threshold_deg)
-                extra = {"cut_nodes": nodes, "dark": dark}
-            return k, kept, extra, coeffs, visible, time.perf_counter() - t
-
-        with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-            futures = [pool.submit(run, k) for k in range(len(lights))]
-            for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
-                k, kept, extra, coeffs, visible, seconds = fut.result()
-                _check_finite(scene, k, lights[k], coeffs)
-                samples[k] = _record(writer, k, kept, extra, coeffs, visible, seconds)
-                if progress is not None:
-                    progress(done, len(lights))
+        # launch: every light sample, written as it finishes
+        samples = _run_samples(scene, baker, ids, lightcut, threshold_deg, jobs, writer, progress)
         # bake_seconds counts the light samples and the store; the hierarchy reports its own time
         bake_seconds = time.perf_counter() - t0 - (hierarchy_seconds or 0.0)
         result = BakeResult(
@@ -309,29 +280,82 @@ def bake(
             samples=samples,
             hierarchy_seconds=hierarchy_seconds,
         )
+        # write: the root attributes, then the store moves into place
         if writer is not None:
-            writer.attrs(
-                format=FORMAT_NAME,
-                format_version=FORMAT_VERSION,
-                lodprt_version=_version(),
-                mode="full" if threshold_deg is None else "cut",
-                threshold_deg=threshold_deg,
-                sh_order=sh_order,
-                coefficients_per_vertex=baker.ncoef,
-                channels=baker.channels,
-                bake_seconds=bake_seconds,
-                load_seconds=load_seconds,
-                device=device,
-                source=scene.source,
-                ray_offset=baker.offset,
-                hierarchy_seconds=hierarchy_seconds,
-            )
+            _write_root(writer, scene, baker, result, threshold_deg)
             writer.commit()
         return result
     except BaseException:
         if writer is not None:
             writer.abort()
         raise
+
+
+def _hierarchy(scene: Scene, tree, writer: StoreWriter | None, progress) -> tuple[object, float]:
+    """The vertex hierarchy (``tree``, or built now) and its build seconds; stored under ``hierarchy/``."""
+    from lodprt.model.hierarchy_build import build_hierarchy
+
+    t_h = time.perf_counter()
+    if tree is None:
+        tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=progress)
+    seconds = time.perf_counter() - t_h
+    if writer is not None:
+        for name, arr in tree.to_arrays().items():
+            writer.array(f"hierarchy/{name}", arr, chunk_rows=1 << 18)
+        writer.attrs("hierarchy", levels=tree.levels, seconds=seconds, roots=int(len(tree.roots)), depth=tree.depth)
+    return tree, seconds
+
+
+def _run_samples(scene: Scene, baker: Baker, ids: np.ndarray, lightcut, threshold_deg, jobs: int | None,
+                 writer: StoreWriter | None, progress) -> list[dict]:
+    """Bake every light sample on ``jobs`` threads (default: every core on the CPU, 1 on CUDA), full resolution or
+    on its light cut; record each as it finishes. Returns the per-sample statistics in sample order."""
+    lights = scene.lights.positions
+    if jobs is None:
+        jobs = (os.cpu_count() or 1) if baker.device == "cpu" else 1
+    jobs = max(1, min(jobs, len(lights)))
+    samples: list[dict] = [{} for _ in lights]
+
+    def run(k: int):
+        t = time.perf_counter()
+        extra = {}
+        if lightcut is None:
+            coeffs, visible = baker.sample(lights[k])
+            kept = ids
+        else:
+            kept, nodes, dark, coeffs, visible = baker.sample_cut(lights[k], lightcut, threshold_deg)
+            extra = {"cut_nodes": nodes, "dark": dark}
+        return k, kept, extra, coeffs, visible, time.perf_counter() - t
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+        futures = [pool.submit(run, k) for k in range(len(lights))]
+        for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
+            k, kept, extra, coeffs, visible, seconds = fut.result()
+            _check_finite(scene, k, lights[k], coeffs)
+            samples[k] = _record(writer, k, kept, extra, coeffs, visible, seconds)
+            if progress is not None:
+                progress(done, len(lights))
+    return samples
+
+
+def _write_root(writer: StoreWriter, scene: Scene, baker: Baker, result: BakeResult, threshold_deg) -> None:
+    """The store's root attributes (docs/FORMAT.md)."""
+    writer.attrs(
+        format=FORMAT_NAME,
+        format_version=FORMAT_VERSION,
+        lodprt_version=_version(),
+        mode="full" if threshold_deg is None else "cut",
+        threshold_deg=threshold_deg,
+        sh_order=result.sh_order,
+        coefficients_per_vertex=baker.ncoef,
+        channels=baker.channels,
+        bake_seconds=result.bake_seconds,
+        load_seconds=result.load_seconds,
+        device=result.device,
+        source=scene.source,
+        ray_offset=baker.offset,
+        hierarchy_seconds=result.hierarchy_seconds,
+    )
 
 
 def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visible, seconds: float) -> dict:
@@ -341,9 +365,9 @@ def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visib
         "vertices_kept": int(len(kept)),
         "bytes": int(kept.nbytes + coeffs.nbytes + sum(a.nbytes for a in extra.values())),
         "seconds": float(seconds),
-        "shadowed": int(counts[0]),
-        "lit": int(counts[1]),
-        "back_facing": int(counts[2]),
+        "shadowed": int(counts[SHADOWED]),
+        "lit": int(counts[LIT]),
+        "back_facing": int(counts[BACK_FACING]),
     }
     if writer is not None:
         g = sample_group(k)
@@ -367,12 +391,12 @@ def _check_finite(scene: Scene, k: int, light: np.ndarray, coeffs: np.ndarray) -
 
 
 def _version() -> str:
-    from lodprt import __version__
+    from lodprt.version import __version__
 
     return __version__
 
 
-def _write_scene(writer: StoreWriter, scene: Scene, baker: _Baker) -> None:
+def _write_scene(writer: StoreWriter, scene: Scene, baker: Baker) -> None:
     writer.array("scene/positions", scene.positions.astype(np.float32), chunk_rows=1 << 18)
     writer.array("scene/normals", scene.normals.astype(np.float32), chunk_rows=1 << 18)
     writer.array("scene/faces", scene.faces.astype(np.int32), chunk_rows=1 << 18)

@@ -1,16 +1,15 @@
-"""Slow, obviously-correct float64 numpy bake with Embree rays: the oracle of the tests and the baseline of the
-benchmarks. Independent of the Warp kernels (another ray caster, another precision, no shared code path beyond the
-SH reference in ``lodprt.model.sh``). Needs the ``dev`` extra (embreex)."""
+"""Float64 numpy bake with Embree rays: the oracle of the tests and the baseline of the benchmarks (visibility and
+Phong SH coefficients, T-6, P-6). Shares no code path with the Warp kernels beyond the visibility state numbers
+(``lodprt.kernels.visibility``) and the SH reference (``lodprt.model.sh``). Needs the ``dev`` extra (embreex)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model import sh
 from lodprt.model.scene import Scene
 
-# visibility states, as in lodprt.kernels.visibility
-SHADOWED, LIT, BACK_FACING = 0, 1, 2
 
 
 class EmbreeCaster:

@@ -1,24 +1,8 @@
-"""Distant-light precomputed radiance transfer per vertex (patent sections 2-3; SPEC 6) and its store.
-
-Diffuse transfer (P-10): a vertex of albedo ``kd`` under distant lighting L(s) (SH coefficients ``L_i``) leaves
-radiance ``L_o = sum_i T_i L_i`` with
-
-    unshadowed      T_i = kd/pi integral max(n.s, 0) y_i(s) ds                (closed form: the cosine lobe, P-6)
-    shadowed        T_i = kd/pi integral max(n.s, 0) V(s) y_i(s) ds            (M_p = H_N V_p, rays)
-    interreflected  T = T^0 + T^1 + ...,  T^b(p) = kd/pi integral max(n.s, 0) (1 - V(s)) T^{b-1}(hit(p, s)) ds
-
-where ``T^{b-1}(hit)`` is interpolated barycentrically from the hit triangle's vertices and only front faces pass
-light on. Bounce passes stop when a pass' energy (its mean response to a unit white sky, ``sqrt(4 pi) T_0``, over
-vertices and channels) falls below ``threshold`` times the direct pass' energy, or after ``bounces`` passes.
-
-Glossy transfer (P-11, P-12): per vertex a matrix ``M_ij = integral V(s) H(n.s) y_i(s) y_j(s) ds`` (rows: order of
-the transferred radiance, columns: order of the source lighting) maps lighting to transferred incident radiance;
-at run time it is convolved with the Phong lobe of the material and evaluated in the reflection direction
-(:mod:`lodprt.runtime.environment_relight`).
-
-Units: the transfer includes ``kd / pi`` (a Lambertian of albedo ``kd``; an irradiance map gives ``kd E / pi``,
-:mod:`lodprt.model.irradiance`). The glossy term is ``ks integral L(u) max(R.u, 0)^n du`` (the thesis' Phong lobe,
-unnormalised). Lighting and transfer are in the world frame (y up).
+"""Distant-light precomputed radiance transfer per vertex (patent sections 2-3; SPEC 6), baked with the Warp
+kernels of ``lodprt.kernels.transfer``: diffuse transfer vectors, unshadowed, shadowed or interreflected (P-10),
+glossy transfer matrices (P-11; used at run time with P-12), and the transfer cut of the vertex hierarchy for LOD.
+Written as a ``lodprt-transfer`` store (:mod:`lodprt.store.transfer_store`). Equations, units and the stopping rule
+of the bounce passes: docs/ENVIRONMENT.md, "Transfer bake".
 """
 
 from __future__ import annotations
@@ -31,17 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.model import sh
 from lodprt.devices import resolve_device, warp
-from lodprt.errors import LodprtError, StoreError
-from lodprt.store.bake_store import StoreWriter, prepare_destination, store_format
+from lodprt.errors import LodprtError
+from lodprt.model import sh
+from lodprt.store.transfer_store import prepare_transfer_destination, write_transfer_store
 
 log = logging.getLogger(__name__)
 
 MODES = ("unshadowed", "shadowed", "interreflected")
 GLOSSY_MODES = {"none": 0, "hemisphere": 1, "shadowed": 2}
-TRANSFER_FORMAT = "lodprt-transfer"
-TRANSFER_FORMAT_VERSION = 1
 #: ray origin offset as a fraction of the scene diagonal (the same as the point-light bake)
 RAY_OFFSET_FRACTION = 1e-4
 
@@ -187,7 +169,7 @@ def unshadowed_transfer_closed_form(geom: Geometry, *, order: int) -> np.ndarray
     wp = warp()
     _, _, nrm, _ = geom._warp()
     n = len(geom.positions)
-    scale = sh._zonal_scale(sh.cosine_power_zonal(1.0, order)).astype(np.float32)
+    scale = sh.zonal_scale(sh.cosine_power_zonal(1.0, order)).astype(np.float32)
     out = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
     wp.launch(ktr.unshadowed_closed_form, dim=n, device=geom.device,
               inputs=[nrm, int(order), wp.array(scale, dtype=wp.float32, device=geom.device)], outputs=[out])
@@ -223,7 +205,7 @@ class DiffuseTransfer:
 def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", rays: int = 256, bounces: int = 4,
                      threshold: float = 1e-3, rotate: bool = False, seed: int = 0, keep_passes: bool = False,
                      progress=None, jobs: int | None = None) -> DiffuseTransfer:
-    """Per-vertex diffuse transfer vectors (P-10 and the interreflection passes; module docstring).
+    """Per-vertex diffuse transfer vectors (P-10 and the interreflection passes; docs/ENVIRONMENT.md).
 
     ``mode``: unshadowed (closed form), shadowed or interreflected (``bounces`` passes at most after the direct
     one, stopping once a pass' energy is below ``threshold`` times the direct energy). ``progress(done, total)``
@@ -367,17 +349,6 @@ def transfer_cut(h, transfer, threshold: float, *, floor_fraction: float = 0.05)
     return np.flatnonzero(ok & ~parent_ok).astype(np.int32)
 
 
-def complete_transfer(h, positions, normals, cut_nodes, coefficients) -> np.ndarray:
-    """Transfer vectors of every vertex from those of a cut's vertices (T-15 completion, ``lodprt.model.completion``):
-    cut_nodes (K,), coefficients (K, ...) at ``h.vertex[cut_nodes]`` -> (V, ...) float64."""
-    from lodprt.model.completion import CompletionPlan
-
-    cut_nodes = np.asarray(cut_nodes)
-    plan = CompletionPlan(h, positions, normals)
-    return plan.complete(h.vertex[cut_nodes], np.asarray(coefficients), h.num_vertices, cut_nodes=cut_nodes,
-                         dark=np.zeros(len(cut_nodes), bool))
-
-
 # -- bake and store ---------------------------------------------------------------------------------------------
 
 
@@ -410,11 +381,9 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     With ``lod_threshold`` the vertex hierarchy is built (or ``tree`` used) and only the vertices of
     :func:`transfer_cut` keep their diffuse transfer vectors in the store; the rest are completed on reading.
     """
-    from lodprt import __version__
-
     device = resolve_device(device)
     if out is not None:
-        prepare_destination(Path(out), overwrite=overwrite, format=TRANSFER_FORMAT, what="lodprt transfer store")
+        prepare_transfer_destination(out, overwrite=overwrite)
     t_load = load_kernels(device)
     t0 = time.perf_counter()
     geom = Geometry.from_scene(scene, device=device)
@@ -430,7 +399,7 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     if lod_threshold is not None:
         t_h = time.perf_counter()
         if tree is None:
-            from lodprt.model.hierarchy import build_hierarchy
+            from lodprt.model.hierarchy_build import build_hierarchy
 
             tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
         hierarchy_seconds = time.perf_counter() - t_h
@@ -439,39 +408,14 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device, cut_nodes, tree)
     if out is None:
         return result
-    path = Path(out)
-    # the same partial-folder writer as the point-light bake: a killed bake never touches ``path`` (store.py)
-    writer = StoreWriter(path, overwrite=overwrite, format=TRANSFER_FORMAT, what="lodprt transfer store")
-    try:
-        arr = writer.array
-        arr("scene/positions", scene.positions.astype(np.float32))
-        arr("scene/normals", scene.normals.astype(np.float32))
-        arr("scene/faces", scene.faces.astype(np.int32))
-        arr("scene/material_id", scene.material_id.astype(np.int32))
-        arr("materials/kd", np.array([m.kd for m in scene.materials], np.float32))
-        arr("materials/ks", np.array([m.ks for m in scene.materials], np.float32))
-        arr("materials/shininess", np.array([m.shininess for m in scene.materials], np.float32))
-        if cut_nodes is None:
-            arr("transfer/diffuse", diffuse.transfer)
-        else:
-            kept = tree.vertex[cut_nodes].astype(np.int32)
-            arr("transfer/vertex_ids", kept)
-            arr("transfer/cut_nodes", cut_nodes)
-            arr("transfer/diffuse", diffuse.transfer[kept])
-            for name, a in tree.to_arrays().items():
-                arr(f"hierarchy/{name}", a)
-            writer.attrs("hierarchy", levels=tree.levels, seconds=hierarchy_seconds)
-        arr("transfer/glossy_vertex_ids", gids)
-        if gmat is not None:
-            arr("transfer/glossy", gmat)
-        if environment is not None:
-            arr("environment/coefficients", environment.project(order))
-            writer.attrs("environment", source=environment.source, kind=environment.kind,
-                         resolution=environment.resolution)
-        writer.attrs(
-            format=TRANSFER_FORMAT,
-            format_version=TRANSFER_FORMAT_VERSION,
-            lodprt_version=__version__,
+    env = None
+    if environment is not None:
+        env = (environment.project(order),
+               {"source": environment.source, "kind": environment.kind, "resolution": environment.resolution})
+    result.path = write_transfer_store(
+        Path(out), scene, overwrite=overwrite, diffuse=diffuse.transfer, glossy_ids=gids, glossy=gmat,
+        cut_nodes=cut_nodes, tree=tree, hierarchy_seconds=hierarchy_seconds, environment=env,
+        attrs=dict(
             source=str(scene.source),
             sh_order=int(order),
             mode=mode,
@@ -491,65 +435,6 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
             bake_seconds=float(seconds),
             load_seconds=float(t_load),
             device=device,
-        )
-        writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
-    result.path = path
+        ),
+    )
     return result
-
-
-def is_transfer_store(path) -> bool:
-    return store_format(path) == TRANSFER_FORMAT
-
-
-class TransferStore:
-    """Read access to a ``lodprt-transfer`` store (docs/FORMAT.md)."""
-
-    def __init__(self, path):
-        import zarr
-
-        self.path = Path(path)
-        if not self.path.exists():
-            raise StoreError(f"{self.path}: no such store")
-        if not is_transfer_store(self.path):
-            raise StoreError(f"{self.path}: not a lodprt transfer store (zarr.json without attribute format='{TRANSFER_FORMAT}'; "
-                             "bake one with lodprt bake-environment)")
-        self.root = zarr.open_group(str(self.path), mode="r")
-        self.attrs = dict(self.root.attrs)
-        if self.attrs.get("format_version") != TRANSFER_FORMAT_VERSION:
-            raise StoreError(f"{self.path}: format_version {self.attrs.get('format_version')!r}; this lodprt reads "
-                             f"version {TRANSFER_FORMAT_VERSION}")
-
-    def read(self, name: str) -> np.ndarray:
-        try:
-            return self.root[name][...]
-        except KeyError as exc:
-            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
-
-    def has(self, name: str) -> bool:
-        try:
-            self.root[name]
-            return True
-        except KeyError:
-            return False
-
-    @property
-    def order(self) -> int:
-        return int(self.attrs["sh_order"])
-
-    def diffuse(self) -> np.ndarray:
-        """(V, 3, n*n) diffuse transfer of every vertex; a LOD store's missing vertices are completed (T-15)."""
-        if not hasattr(self, "_diffuse"):
-            t = self.read("transfer/diffuse")
-            if self.has("transfer/cut_nodes"):
-                from lodprt.model.hierarchy import Hierarchy
-
-                arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS if self.has(f"hierarchy/{name}")}
-                tree = Hierarchy.from_arrays(arrays)
-                t = complete_transfer(tree, self.read("scene/positions").astype(np.float64),
-                                      self.read("scene/normals").astype(np.float64), self.read("transfer/cut_nodes"),
-                                      t.astype(np.float64)).astype(np.float32)
-            self._diffuse = t
-        return self._diffuse

@@ -13,7 +13,6 @@ at order 3 is a few milliseconds for the diffuse part.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 
@@ -49,7 +48,7 @@ def glossy_radiance(matrices, positions, normals, ks, shininess, lighting, eye) 
     scale = np.empty((g, no2))
     shin = np.asarray(shininess, np.float64)
     for n in np.unique(shin):  # P-6 convolution factors sqrt(4 pi/(2l+1)) z_l of each material's lobe
-        scale[shin == n] = sh._zonal_scale(sh.cosine_power_zonal(n, order))
+        scale[shin == n] = sh.zonal_scale(sh.cosine_power_zonal(n, order))
     v = np.asarray(eye, np.float64)[None, :] - positions
     v /= np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
     nrm = np.asarray(normals, np.float64)
@@ -59,7 +58,7 @@ def glossy_radiance(matrices, positions, normals, ks, shininess, lighting, eye) 
 
 
 def open_transfer(path):
-    from lodprt.precompute.transfer import TransferStore
+    from lodprt.store.transfer_store import TransferStore
 
     return TransferStore(path)
 
@@ -80,29 +79,3 @@ def relit_radiance(store, lighting, eye=None) -> np.ndarray:
     return rad
 
 
-def render_relit(store, lighting, *, eye, target=None, up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600),
-                 white: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Render the store relit by ``lighting`` (3, n^2) from ``eye``: (image (H, W, 3) uint8, radiance (V, 3)).
-
-    Per-vertex radiance, tone-mapped with :func:`lodprt.render.tone_map` (``white`` = radiance shown as white,
-    default the 99th percentile), drawn with :func:`lodprt.render.render` (offscreen EGL).
-    """
-    from lodprt.display.render import render, tone_map
-
-    pos = store.read("scene/positions")
-    faces = store.read("scene/faces")
-    if target is None:
-        used = np.unique(faces)
-        target = (pos[used].min(0) + pos[used].max(0)) / 2
-    rad = relit_radiance(store, lighting, eye)
-    img = render(pos, faces, tone_map(rad, white), eye=eye, target=target, up=up, fov=fov, size=size)
-    return img, rad
-
-
-def save_png(path, image) -> Path:
-    """Write an (H, W, 3) uint8 image as PNG (matplotlib's writer, a runtime dependency already)."""
-    import matplotlib.image
-
-    path = Path(path)
-    matplotlib.image.imsave(path, image)
-    return path

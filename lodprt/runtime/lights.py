@@ -97,3 +97,21 @@ class LightInterpolator:
         W = np.zeros((len(self.samples), 3))
         np.add.at(W, idx.ravel(), (w[:, :, None] * np.asarray(colors, np.float64)[:, None, :]).reshape(-1, 3))
         return W
+
+
+def check_lights(positions, colors, intensity) -> tuple[np.ndarray, np.ndarray]:
+    """Point lights as given by a caller: (L, 3) positions (one (3,) is one light) and their RGB intensities
+    ``colors`` ((L, 3), one (3,) for all, or None: ``intensity``, the bake's). Returns float64 (L, 3) positions
+    and colours; LodprtError naming the field for a wrong shape, a non-finite number or a negative intensity."""
+    pos = np.asarray(positions, np.float64)
+    if pos.ndim == 1:
+        pos = pos[None, :]
+    if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) < 1 or not np.isfinite(pos).all():
+        raise LodprtError(f"lights: expected (L, 3) finite positions with L >= 1, got {np.asarray(positions).tolist()}")
+    col = np.asarray(intensity if colors is None else colors, np.float64)
+    if col.shape == (3,):
+        col = np.repeat(col[None, :], len(pos), axis=0)
+    if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
+        raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
+    return pos, col
+

@@ -37,7 +37,6 @@ the true spread toward ``v``. It costs O(samples x coefficients) per candidate i
 from __future__ import annotations
 
 import concurrent.futures
-import dataclasses
 import logging
 import math
 import os
@@ -48,8 +47,12 @@ import numpy as np
 
 from lodprt.model import sh
 from lodprt.errors import LodprtError
-from lodprt.model.hierarchy import Cut, concat_ranges, map_faces
-from lodprt.runtime.lights import LightInterpolator
+from lodprt.model.hierarchy import concat_ranges, map_faces
+from lodprt.runtime import node_bounds
+from lodprt.runtime.camera import Camera, as_camera, clip_planes, view_projection
+from lodprt.runtime.frames import Frame, StoreFrames
+from lodprt.runtime.lights import LightInterpolator, check_lights
+from lodprt.runtime.view_cut import Cut
 
 log = logging.getLogger(__name__)
 
@@ -78,99 +81,6 @@ class NodeErrors(typing.NamedTuple):
     e_lumi: np.ndarray
     footprint: np.ndarray
     e_detail: np.ndarray
-
-
-@dataclasses.dataclass(frozen=True)
-class Camera:
-    """Perspective camera: right-handed, looks from ``eye`` at ``target``, ``up`` (default y) is up on screen,
-    ``fov`` the vertical field of view in degrees, ``width`` x ``height`` pixels. ``near``/``far`` None: chosen
-    from the scene's bounds."""
-
-    eye: tuple[float, float, float]
-    target: tuple[float, float, float]
-    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    fov: float = 40.0
-    width: int = 800
-    height: int = 600
-    near: float | None = None
-    far: float | None = None
-
-    def __post_init__(self):
-        for name in ("eye", "target", "up"):
-            v = np.asarray(getattr(self, name), np.float64)
-            if v.shape != (3,) or not np.isfinite(v).all():
-                raise LodprtError(f"camera {name}: expected 3 finite numbers, got {getattr(self, name)!r}")
-            object.__setattr__(self, name, tuple(float(x) for x in v))
-        if not 0.0 < float(self.fov) < 180.0:
-            raise LodprtError(f"camera fov: {self.fov} degrees; must lie strictly between 0 and 180")
-        if int(self.width) < 1 or int(self.height) < 1:
-            raise LodprtError(f"camera size: {self.width} x {self.height}; width and height must be >= 1")
-        if self.near is not None and self.far is not None and not 0.0 < self.near < self.far:
-            raise LodprtError(f"camera near/far: {self.near}, {self.far}; need 0 < near < far")
-
-
-@dataclasses.dataclass
-class Frame:
-    """What one ``Runtime.update()`` produces for the display (all arrays are fresh copies).
-
-    vertex_ids (A,) int32 original vertex of each active node (store vertex order);
-    positions (A, 3) float32 and normals (A, 3) float32 of those vertices;
-    triangles (M, 3) int32 indices into ``positions`` (the view cut's mesh, degenerate faces dropped);
-    coefficients (A, 3, ncoef) float32 SH coefficients over the view direction of the outgoing radiance, RGB,
-    every light's interpolated and completed coefficients summed with its intensity applied (linear radiance);
-    radiance (A, 3) float32 linear RGB radiance toward ``camera.eye`` (T-7 per vertex);
-    lights (L, 3) float64 light positions as used (after clamping), light_colors (L, 3) float64 RGB intensities;
-    camera the ``Camera``; stats a dict (triangles, active_nodes, nodes_touched, refined, coarsened, ms_cut,
-    ms_triangulate, ms_relight, ms_total, ...).
-    """
-
-    vertex_ids: np.ndarray
-    positions: np.ndarray
-    normals: np.ndarray
-    triangles: np.ndarray
-    coefficients: np.ndarray
-    radiance: np.ndarray
-    lights: np.ndarray
-    light_colors: np.ndarray
-    camera: Camera
-    stats: dict
-
-
-def display(radiance_over_white):
-    """The screen intensity of a radiance in units of the white point as the thesis counts it (3.4.2.2): values
-    above 1 show as 1, below 0 as 0, i.e. clip(x, 0, 1) (linear: no display gamma)."""
-    return np.clip(np.asarray(radiance_over_white, np.float64), 0.0, 1.0)
-
-
-def clip_planes(view_proj: np.ndarray) -> np.ndarray:
-    """(6, 4) inward frustum planes (a, b, c, d) with unit (a, b, c) from a 4x4 view-projection matrix
-    (Gribb-Hartmann): a point x is inside when ``a x + b y + c z + d >= 0`` for all six."""
-    m = np.asarray(view_proj, np.float64)
-    planes = np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2], m[3] - m[2]])
-    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
-
-
-def _as_camera(camera=None, **kw) -> Camera:
-    if isinstance(camera, Camera):
-        if kw:
-            raise LodprtError("set_camera: pass either a Camera or its fields, not both")
-        return camera
-    if camera is not None:
-        kw["eye"] = camera
-    try:
-        return Camera(**kw)
-    except TypeError as exc:
-        raise LodprtError(f"set_camera: {exc}") from exc
-
-
-def view_projection(camera: Camera, bounds: np.ndarray) -> np.ndarray:
-    """4x4 projection @ view of ``camera`` (OpenGL clip space), with the renderer's near and far planes
-    (``lodprt.render.camera_matrices``) for the scene's bounds (2, 3): the cut culls with the planes that draw."""
-    from lodprt.display.render import camera_matrices
-
-    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    view, proj = camera_matrices(camera, corners)
-    return proj @ view
 
 
 class Runtime:
@@ -255,7 +165,7 @@ class Runtime:
         self._blocker = np.full(h.num_nodes, -1, np.int64)  # a finer neighbour that blocked this collapse
         self._fails = np.zeros(h.num_nodes, np.int8)  # failed collapses in a row, and when to try again
         lr = h.leaf_range
-        self._subtree_edges = self.cut._ptr[lr[:, 1]] - self.cut._ptr[lr[:, 0]]
+        self._subtree_edges = self.cut.edge_offsets[lr[:, 1]] - self.cut.edge_offsets[lr[:, 0]]
         self._retry_at = np.zeros(h.num_nodes, np.int64)
         # faces around each original vertex (CSR), for the incremental triangulation
         fv = self.faces.ravel()
@@ -280,96 +190,23 @@ class Runtime:
     def box_half(self) -> np.ndarray:
         return self._ensure_boxes()[1]
 
+    @property
+    def detail(self) -> np.ndarray:
+        """S-2 detail bounds (N - V, S, C, ncoef) float16 (``lodprt.runtime.node_bounds.detail_bounds``)."""
+        return self._ensure_boxes()[2]
+
     def _ensure_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self._boxes is None:
-            centre, half = self._coefficient_boxes()
-            detail = self._detail_boxes()
+            levels = node_bounds.height_levels(self.h)
+            centre, half = node_bounds.coefficient_boxes(self.h, self.coeffs, self.white, levels)
+            detail = node_bounds.detail_bounds(self.h, self.coeffs, self.white, self.store.completion_plan(),
+                                               self.faces, levels)
             wp = self._wp
             self._d["box_centre"] = wp.array(centre, dtype=wp.float16, device=self.device)
             self._d["box_half"] = wp.array(half, dtype=wp.float16, device=self.device)
             self._d["detail"] = wp.array(detail, dtype=wp.float16, device=self.device)
             self._boxes = centre, half, detail
         return self._boxes
-
-    def _detail_boxes(self) -> np.ndarray:
-        """S-2 per light sample: for each internal node, the largest of (a) |C(v) - sum_j w_j C(q_j)| over the
-        collapses in its subtree (T-15 weights over the ring the collapse removed v from) and (b) |C(v) - C(q)|
-        over its leaves v and their original neighbours q, per coefficient, in units of ``white``:
-        (N - V, S, C, ncoef) float16. (a) is zero where the completed field is linear (T-15 has linear precision);
-        (b) is one edge's step, small on smooth fields and large at a shadow or highlight boundary that runs next
-        to the subtree (between two subtrees, where neither's own collapses see it)."""
-        from lodprt.model.completion import CHUNK
-
-        h = self.h
-        V, N = h.num_vertices, h.num_nodes
-        _, S, C, n = self.coeffs.shape
-        detail = np.zeros((N - V, S, C, n), np.float16)
-        if N == V:
-            return detail
-        plan = self.store.completion_plan()
-        c0, c1 = h.children[:, 0], h.children[:, 1]
-        big = float(np.finfo(np.float16).max)
-        ring_v, ring_q, starts = self._leaf_rings()
-        for j in range(S):
-            c = self.coeffs[:, j].reshape(V, C * n) / np.float32(self.white)
-            d = np.zeros((N, C * n), np.float32)
-            if len(ring_v):  # leaves: the largest step to an original neighbour (a shadow edge between subtrees)
-                d[ring_v[starts]] = np.maximum.reduceat(np.abs(c[ring_v] - c[ring_q]), starts, axis=0)
-            for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
-                rows = slice(start, min(start + CHUNK, N - V))
-                r = max(int(plan.ring_len[rows].max()), 1)
-                interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
-                d[V + rows.start:V + rows.stop] = np.abs(c[plan.vertex[rows]] - interp)  # T-15 residual
-            for nodes in self._levels():
-                d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
-            detail[:, j] = np.clip(d[V:], 0, big).reshape(N - V, C, n)
-        return detail
-
-    def _leaf_rings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every original edge in both directions, sorted by its first vertex: (v, q, start of each v's run)."""
-        f = self.faces
-        e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-        e = np.concatenate([e, e[:, ::-1]])
-        e = e[e[:, 0] != e[:, 1]]
-        e = e[np.argsort(e[:, 0], kind="stable")]
-        starts = np.flatnonzero(np.r_[True, e[1:, 0] != e[:-1, 0]]) if len(e) else np.zeros(0, np.int64)
-        return e[:, 0], e[:, 1], starts
-
-    def _levels(self) -> list[np.ndarray]:
-        """Internal nodes grouped by height (children always on lower levels), lowest first."""
-        from lodprt.model.hierarchy import node_heights
-
-        if getattr(self, "_levels_cache", None) is None:
-            hk = node_heights(self.h)
-            order = np.argsort(hk, kind="stable")
-            bounds = np.searchsorted(hk[order], np.arange(1, hk.max() + 2))
-            self._levels_cache = [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
-        return self._levels_cache
-
-    def _coefficient_boxes(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per light sample, the box of every completed coefficient over each internal node's leaves, in units of
-        ``white``: centre and half-width, each (N - V, S, C, ncoef) float16 (clipped to float16's range), made
-        bottom-up one height level at a time (children always sit on lower levels)."""
-        h = self.h
-        V, N = h.num_vertices, h.num_nodes
-        _, S, C, n = self.coeffs.shape
-        centre = np.zeros((N - V, S, C, n), np.float16)
-        half = np.zeros((N - V, S, C, n), np.float16)
-        if N == V:
-            return centre, half
-        levels = self._levels()
-        c0, c1 = h.children[:, 0], h.children[:, 1]
-        big = float(np.finfo(np.float16).max)
-        for j in range(S):
-            mn = np.empty((N, C * n), np.float32)
-            mn[:V] = self.coeffs[:, j].reshape(V, C * n) / np.float32(self.white)
-            mx = mn.copy()
-            for nodes in levels:
-                mn[nodes] = np.minimum(mn[c0[nodes]], mn[c1[nodes]])
-                mx[nodes] = np.maximum(mx[c0[nodes]], mx[c1[nodes]])
-            centre[:, j] = np.clip(0.5 * (mx[V:] + mn[V:]), -big, big).reshape(N - V, C, n)
-            half[:, j] = np.clip(0.5 * (mx[V:] - mn[V:]), 0, big).reshape(N - V, C, n)
-        return centre, half
 
     def _upload(self) -> None:
         """The per-frame kernels' read-only inputs, on the device once."""
@@ -405,7 +242,7 @@ class Runtime:
 
     def _frame_inputs(self) -> tuple:
         wp = self._wp
-        used = wp.array(self._used.astype(np.int32), dtype=wp.int32, device=self.device)
+        used = wp.array(self.used_samples.astype(np.int32), dtype=wp.int32, device=self.device)
         weights = wp.array(self.sample_weights.astype(np.float32), dtype=wp.float32, device=self.device)
         return used, weights
 
@@ -441,19 +278,7 @@ class Runtime:
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
         Outside the sampled region: clamped with a warning, or an error (``outside``)."""
-        pos = np.asarray(positions, np.float64)
-        if pos.ndim == 1:
-            pos = pos[None, :]
-        if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) < 1:
-            raise LodprtError(f"lights: expected (L, 3) positions with L >= 1, got shape {pos.shape}")
-        if colors is None:
-            col = np.repeat(np.asarray(self.store.intensity, np.float64)[None, :], len(pos), axis=0)
-        else:
-            col = np.asarray(colors, np.float64)
-            if col.ndim == 1:
-                col = col[None, :]
-            if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
-                raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
+        pos, col = check_lights(positions, colors, self.store.intensity)
         pos, moved = self.interp.clamp(pos)  # warns (or refuses) once per call
         W = self.interp.rgb_weights(pos, col)  # lights add (thesis 3.4.1)
         self._dirty = True
@@ -461,7 +286,7 @@ class Runtime:
         self.light_colors = col
         self.lights_clamped = int(moved.sum())
         self.sample_weights = W
-        self._used = np.flatnonzero(np.abs(W).sum(1) > 0)
+        self.used_samples = np.flatnonzero(np.abs(W).sum(1) > 0)
 
     def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
                    near=None, far=None) -> Camera:
@@ -469,11 +294,11 @@ class Runtime:
         if isinstance(camera, Camera):
             self.camera = camera
         else:
-            self.camera = _as_camera(camera, target=target, up=up, fov=fov, width=width, height=height,
+            self.camera = as_camera(camera, target=target, up=up, fov=fov, width=width, height=height,
                                      near=near, far=far)
         self._dirty = True
-        self._vp = view_projection(self.camera, self.bounds)
-        self._planes = clip_planes(self._vp)
+        self.vp = view_projection(self.camera, self.bounds)
+        self.planes = clip_planes(self.vp)
         return self.camera
 
     # -- errors ------------------------------------------------------------------------------------------------
@@ -499,93 +324,22 @@ class Runtime:
             self._launch(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
                 d["error_vector"], d["axis"], d["half"], d["radius"],
-                wp.array(self._planes.astype(np.float32), dtype=wp.vec4, device=dev),
-                wp.mat44(*self._vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
-                0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self._focal_px(), used, weights,
+                wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
+                wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
+                0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
                 d["box_centre"], d["box_half"], d["detail"], CRITERIA.index(self.criterion), int(bool(exact)),
-                float(self.error_bound), self._geo_rate(), self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
+                float(self.error_bound), self.geo_rate(), self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
         culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
         return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))
 
-    def _geo_rate(self) -> float:
+    def geo_rate(self) -> float:
         """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance)."""
         return DEFAULT_ERROR_BOUND["screen"] / self.pixel_tolerance
 
-    def _focal_px(self) -> float:
+    def focal_px(self) -> float:
         """Focal length of the camera in pixels: (height / 2) / tan(fov / 2)."""
         return 0.5 * self.camera.height / math.tan(math.radians(self.camera.fov) / 2)
-
-    def _criterion(self, culled, e_geo, e_lumi, footprint, e_detail) -> np.ndarray:
-        """The error compared with the bound (0 where culled): T-14 ``alpha e_geo + (1 - alpha) e_lumi`` for
-        "thesis"; for "screen" (S-1) ``max(E0 g_px / tau_px, e_detail min(1, pi r_px^2))``: the
-        geometric error in
-        pixels at the exchange rate E0 / tau_px (E0 the default bound, tau_px the pixel tolerance: at the default
-        bound a node refines when it moves anything by more than tau_px) and the luminance spread weighted by the
-        share of a pixel the node's footprint covers (S-2: the completion residuals and edge steps under the node,
-        not its spread: a smooth gradient spreads but interpolates well); one bound E then steers both."""
-        if self.criterion == "thesis":
-            err = self.alpha * e_geo + (1.0 - self.alpha) * e_lumi
-        else:
-            cam = self.camera
-            g_px = e_geo * math.hypot(cam.width, cam.height)
-            geo_term = g_px * self._geo_rate()
-            err = np.maximum(geo_term, e_detail * np.minimum(1.0, np.pi * footprint ** 2))
-        return np.where(culled, 0.0, err)
-
-    def node_errors_reference(self, nodes) -> NodeErrors:
-        """``node_errors`` in float64 numpy (the tests' reference for the kernel)."""
-        if self.camera is None:
-            raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
-        nodes = np.asarray(nodes, np.int64)
-        cam = self.camera
-        eye = np.asarray(cam.eye)
-        p = self.node_pos[nodes]
-        r = self.radius[nodes]
-        # outside the frustum: the bounding sphere is entirely behind one plane
-        s = p @ self._planes[:, :3].T + self._planes[:, 3]
-        outside = (s < -r[:, None]).any(1)
-        # T-13 back-facing: every normal in the cone is more than 90 degrees from every direction to the eye
-        v = eye - p
-        d = np.linalg.norm(v, axis=1)
-        vh = v / np.where(d > 0, d, 1.0)[:, None]
-        ang = np.arccos(np.clip((vh * self.axis[nodes]).sum(1), -1.0, 1.0))
-        spread = np.arcsin(np.clip(r / np.where(d > 0, d, 1.0), 0.0, 1.0))
-        back = (d > r) & (ang > 0.5 * np.pi + self.half[nodes] + spread)
-        culled = outside | back
-        # e_geo: the error vector p - p' on screen over the screen diagonal
-        a = self.node_collapsed[nodes]
-        b = a - self.error_vector[nodes]
-        ca = np.c_[a, np.ones(len(a))] @ self._vp.T
-        cb = np.c_[b, np.ones(len(b))] @ self._vp.T
-        tiny = 1e-12
-        behind = (ca[:, 3] <= tiny) | (cb[:, 3] <= tiny)
-        half_wh = 0.5 * np.array([cam.width, cam.height], np.float64)
-        sa = ca[:, :2] / np.where(behind, 1.0, ca[:, 3])[:, None] * half_wh
-        sb = cb[:, :2] / np.where(behind, 1.0, cb[:, 3])[:, None] * half_wh
-        e_geo = np.where(behind, 1.0, np.linalg.norm(sa - sb, axis=1) / math.hypot(cam.width, cam.height))
-        e_geo = np.clip(e_geo, 0.0, 1.0)
-        # e_lumi: display-space spread bounded by the interval of the leaves' radiance toward the eye
-        y = sh.basis(vh, self.order)[:, :self.box_centre.shape[3]]  # 1 (diffuse-only store) or order^2 wide
-        hi = np.zeros((len(nodes), 3))
-        lo = np.zeros((len(nodes), 3))
-        det = np.zeros((len(nodes), 3))
-        internal = nodes - self.h.num_vertices
-        detail = self._ensure_boxes()[2]
-        for j in self._used:
-            mid = (self.box_centre[internal, j].astype(np.float64) * y[:, None, :]).sum(-1)  # (K, C)
-            rad = (self.box_half[internal, j].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1)
-            w = self.sample_weights[j][None, :]  # C = 1 (grey) broadcasts over R, G, B
-            hi += (mid + rad) * w
-            lo += (mid - rad) * w
-            det += (detail[internal, j].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1) * np.abs(w)
-        e_lumi = np.clip((display(hi) - display(lo)).max(1), 0.0, 1.0)
-        depth = np.c_[p, np.ones(len(p))] @ self._vp[3]  # clip w of the node centre
-        foot = np.where(depth > r, np.minimum(r * self._focal_px() / np.where(depth > r, depth, 1.0), 1e9), 1e9)
-        e_geo, e_lumi = np.where(culled, 0.0, e_geo), np.where(culled, 0.0, e_lumi)  # culled: no error computed
-        foot = np.where(culled, 0.0, foot)
-        det = np.where(culled, 0.0, np.minimum(det.max(1), 1.0))
-        return NodeErrors(culled, self._criterion(culled, e_geo, e_lumi, foot, det), e_geo, e_lumi, foot, det)
 
     # -- frames ------------------------------------------------------------------------------------------------
     def _pass(self, *, backoff: bool = False) -> tuple[int, int, int]:
@@ -735,7 +489,7 @@ class Runtime:
         """(K, 3, ncoef) float32 RGB coefficients of the current lights at ``vertex_ids`` (default: every vertex):
         ``sum_j W[j, c] C_j`` over the completed light samples (T-12 weights, intensities applied)."""
         ids = np.arange(self.h.num_vertices) if vertex_ids is None else np.asarray(vertex_ids, np.int64)
-        u = self._used
+        u = self.used_samples
         c = self.coeffs[ids[:, None], u[None, :]]  # (K, U, C, ncoef)
         w = self.sample_weights[u].astype(np.float32)  # (U, 3)
         if self.channels == 1:
@@ -758,74 +512,12 @@ class Runtime:
             raise LodprtError(f"the view cut violates {len(bad)} dependencies, e.g. nodes {bad[0].tolist()}")
 
 
-def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", outside: str = "clamp"):
-    """The completed coefficients of every vertex of ``store`` under point lights at (L, 3) positions, without a
-    ``Runtime`` (stores baked without a hierarchy too): T-12 interpolation, T-15 completion, lights summed with
-    their RGB intensities (``colors`` (L, 3) or one (3,) for all; default the bake's). Returns (lights clamped
-    into the sampled region (L, 3), colours (L, 3), coefficients (V, 3, ncoef) float64)."""
-    interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting=weighting,
-                               outside=outside)
-    pos, _ = interp.clamp(lights)
-    try:
-        col = np.broadcast_to(store.intensity if colors is None else np.asarray(colors, np.float64), pos.shape)
-    except ValueError:
-        col = np.asarray(colors, np.float64)
-    if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
-        raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
-    col = col.astype(np.float64)
-    W = interp.rgb_weights(pos, col)
-    # as wide as the stored coefficients: 1 (y_0 of a diffuse-only store) or order^2
-    out = np.zeros((store.num_vertices, 3, store.coefficients_per_vertex))
-    for j in np.flatnonzero(np.abs(W).sum(1) > 0):
-        c = store.coefficients(int(j))  # (V, C, ncoef), completed; C = 1 (grey) broadcasts over R, G, B
-        out += c * W[j][None, :, None]
-    return pos, col, out
-
-
-def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp") -> np.ndarray:
-    """(V, 3) float32 radiance toward ``eye`` of every vertex of ``store`` under point lights (``light_coefficients``;
-    ``Runtime.radiance`` gives the same numbers)."""
-    from lodprt.store.bake_store import radiance_toward
-
-    _, _, coeffs = light_coefficients(store, lights, colors=colors, weighting=weighting, outside=outside)
-    return radiance_toward(store.positions, store.normals, coeffs, eye, np.ones(3))
-
-
-def object_bounds(store) -> np.ndarray:
-    """(2, 3) bounds of the scene's objects without the floor (all referenced vertices when only a floor)."""
-    pos = np.asarray(store.positions)
-    oid = np.asarray(store.read("scene/object_id"))
-    names = list(store.root["scene"].attrs.get("object_names", []))
-    used = np.zeros(len(pos), bool)
-    used[np.asarray(store.faces).ravel()] = True
-    keep = used.copy()
-    if "floor" in names:
-        keep &= oid != names.index("floor")
-    p = pos[keep] if keep.any() else pos[used] if used.any() else pos
-    return np.array([p.min(0), p.max(0)]) if len(p) else np.zeros((2, 3))
-
-
-def camera_path(rt: "Runtime", path: str, frames: int, *, size=(800, 600), fov: float = 40.0, light_turns: float = 2.0):
-    """Yields ``frames`` (Camera, lights (1, 3)) pairs: ``orbit`` circles the objects at 2.2 object sizes, 25
-    degrees above them; ``dolly`` moves from 3 object sizes to 0.8 straight toward them; the light circles inside
-    the sampled light box ``light_turns`` times over the path."""
-    if path not in ("orbit", "dolly"):
-        raise LodprtError(f"camera path {path!r}: choose 'orbit' or 'dolly'")
-    b = object_bounds(rt.store)
-    c = 0.5 * (b[0] + b[1])
-    size_ = float(np.linalg.norm(b[1] - b[0])) or 1.0
-    box = np.asarray(rt.store.root["lights"].attrs["box"], np.float64)
-    lc, lh = 0.5 * (box[:3] + box[3:]), 0.5 * (box[3:] - box[:3])
-    elev = math.radians(25.0)
-    for k in range(int(frames)):
-        t = k / max(int(frames), 1)
-        if path == "orbit":
-            a = 2.0 * math.pi * t
-            dist = 2.2 * size_
-        else:
-            a = 0.6
-            dist = size_ * (3.0 - 2.2 * t)
-        eye = c + dist * np.array([math.cos(elev) * math.sin(a), math.sin(elev), math.cos(elev) * math.cos(a)])
-        la = 2.0 * math.pi * light_turns * t
-        light = lc + 0.8 * lh * np.array([math.cos(la), 0.0, math.sin(la)])
-        yield Camera(eye=tuple(eye), target=tuple(c), fov=fov, width=int(size[0]), height=int(size[1])), light[None, :]
+def frame_source(store, *, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
+                 criterion: str = "screen"):
+    """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut; ``lod``
+    False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution)."""
+    if store.has_hierarchy:
+            return Runtime(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
+    if lod:
+        log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
+    return StoreFrames(store)

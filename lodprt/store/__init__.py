@@ -2,5 +2,6 @@
 the model (completion on read) (docs/ARCHITECTURE.md)."""
 
 from lodprt.store.bake_store import Store, StoreWriter, is_store, open_store, store_format
+from lodprt.store.transfer_store import TransferStore, is_transfer_store
 
-__all__ = ["Store", "StoreWriter", "is_store", "open_store", "store_format"]
+__all__ = ["Store", "StoreWriter", "TransferStore", "is_store", "is_transfer_store", "open_store", "store_format"]

@@ -25,8 +25,10 @@ log = logging.getLogger(__name__)
 
 FORMAT_NAME = "lodprt"
 FORMAT_VERSION = 1
-#: every store format lodprt writes through ``StoreWriter`` (``lodprt.transfer.TRANSFER_FORMAT`` is the second)
-KNOWN_FORMATS = (FORMAT_NAME, "lodprt-transfer")
+#: the ``format`` of an environment transfer store (``lodprt.store.transfer_store``)
+TRANSFER_FORMAT = "lodprt-transfer"
+#: every store format lodprt writes through ``StoreWriter``
+KNOWN_FORMATS = (FORMAT_NAME, TRANSFER_FORMAT)
 #: owner record inside a partial folder (and inside a parked ``.replaced-<pid>`` store while a commit runs):
 #: host, pid, boot id and process start time of the writer, so a later bake can tell a dead writer from a live one
 #: even when the pid has been reused. Removed before the folder becomes the store (zarr warns about unknown files).
@@ -306,7 +308,7 @@ class Store:
         if not self.path.exists():
             raise StoreError(f"{self.path}: no such store")
         fmt = store_format(self.path)
-        if fmt == "lodprt-transfer":
+        if fmt == TRANSFER_FORMAT:
             raise StoreError(f"{self.path}: a transfer store (bake --environment): relight it with render-environment "
                              f"or render --environment, not with the point-light commands")
         if not is_store(self.path):
@@ -455,7 +457,7 @@ class Store:
         return "hierarchy" in self.root
 
     def hierarchy(self):
-        """The stored vertex hierarchy (``lodprt.hierarchy.Hierarchy``); StoreError when the bake made none."""
+        """The stored vertex hierarchy (``lodprt.model.hierarchy.Hierarchy``); StoreError when the bake made none."""
         from lodprt.model.hierarchy import Hierarchy
 
         if not self.has_hierarchy:

@@ -1,0 +1,141 @@
+"""The arguments the ``lodprt`` commands share, each defined once, and the checks of their values.
+
+Every command module (bake, inspect, frames, display, environment) builds its parsers from these helpers, so a
+flag means the same thing, with the same default and help, wherever it appears.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from lodprt.errors import LodprtError
+
+FOV = 40.0
+"""Default vertical field of view in degrees."""
+SIZE = (800, 600)
+"""Default image (or screen) size in pixels, width and height."""
+XYZ = ("X", "Y", "Z")
+
+
+def add_store(p: argparse.ArgumentParser) -> None:
+    """The store a command reads (positional)."""
+    p.add_argument("store", metavar="OUT.zarr")
+
+
+def add_scene(p: argparse.ArgumentParser) -> None:
+    """The scene a bake reads (positional)."""
+    p.add_argument("scene", metavar="SCENE", help="'demo', a .toml scene file, or a mesh (obj, ply, stl, off, glb)")
+
+
+def add_output(p: argparse.ArgumentParser, metavar: str, what: str = "output", *,
+               replaces: str = "an existing output") -> None:
+    """``-o/--out`` (required) and ``--overwrite``: an existing output is never replaced without it."""
+    p.add_argument("-o", "--out", required=True, metavar=metavar, help=f"{what} (not replaced without --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help=f"replace {replaces}")
+
+
+def add_store_output(p: argparse.ArgumentParser, kind: str) -> None:
+    """``-o OUT.zarr`` and ``--overwrite`` of a bake writing a ``kind`` store."""
+    add_output(p, "OUT.zarr", "store to write", replaces=f"OUT if it is an existing {kind} store")
+
+
+def add_device(p: argparse.ArgumentParser, purpose: str = "") -> None:
+    """``--device``: the Warp device (``purpose`` e.g. ' of the per-frame kernels')."""
+    p.add_argument("--device", default=None, metavar="DEV",
+                   help=f"Warp device{purpose}: cpu, cuda, cuda:N (default: cuda if present, else cpu)")
+
+
+def add_jobs(p: argparse.ArgumentParser, each: str) -> None:
+    """``--jobs``: CPU threads of a bake (``each`` says what one thread does)."""
+    p.add_argument("--jobs", type=int, default=None, metavar="J", help=f"CPU threads, {each} (default: all cores)")
+
+
+def add_json(p: argparse.ArgumentParser, what: str = "a JSON object") -> None:
+    """``--json``: machine-readable output instead of the text."""
+    p.add_argument("--json", action="store_true", help=f"print {what}")
+
+
+def add_sample(p, *, required: bool = False) -> None:
+    """``--sample K``: a light sample of the bake (``p`` may be a parser or a mutually exclusive group)."""
+    p.add_argument("--sample", type=int, required=required, metavar="K", help="light sample index (see lodprt info)")
+
+
+def add_eye(p: argparse.ArgumentParser, *, required: bool = True) -> None:
+    """``--eye X Y Z`` (when not required, the default is a three-quarter view of the scene)."""
+    p.add_argument("--eye", type=float, nargs=3, required=required, default=None, metavar=XYZ,
+                   help="eye position" + ("" if required else " (default: a three-quarter view of the scene)"))
+
+
+def add_screen(p: argparse.ArgumentParser, *, size=SIZE, size_what: str = "image size in pixels") -> None:
+    """``--fov`` and ``--size W H``."""
+    p.add_argument("--fov", type=float, default=FOV, metavar="DEG",
+                   help=f"vertical field of view in degrees (default {FOV:g})")
+    p.add_argument("--size", type=int, nargs=2, default=tuple(size), metavar=("W", "H"),
+                   help=f"{size_what} (default {size[0]} {size[1]})")
+
+
+def add_camera(p: argparse.ArgumentParser, *, eye_required: bool = True, up: bool = False, size=SIZE,
+               size_what: str = "image size in pixels") -> None:
+    """The camera: ``--eye``, ``--target``, optionally ``--up``, then ``--fov`` and ``--size``."""
+    add_eye(p, required=eye_required)
+    p.add_argument("--target", type=float, nargs=3, default=None, metavar=XYZ, help="look-at point (default: scene centre)")
+    if up:
+        p.add_argument("--up", type=float, nargs=3, default=(0.0, 1.0, 0.0), metavar=XYZ, help="up direction (default +y)")
+    add_screen(p, size=size, size_what=size_what)
+
+
+def add_view_cut(p: argparse.ArgumentParser) -> None:
+    """The view cut's criterion and bounds (docs/RUNTIME.md)."""
+    p.add_argument("--criterion", choices=("screen", "thesis"), default="screen",
+                   help="view-cut criterion: 'screen' bounds the error on screen (luminance in units of white, "
+                        "geometry in pixels; default), 'thesis' is T-14's blend alpha e_geo + (1 - alpha) e_lumi")
+    p.add_argument("--error-bound", type=float, default=None, metavar="E",
+                   help="view cut error bound (default 0.2 of white for 'screen', 0.25 for 'thesis')")
+    p.add_argument("--alpha", type=float, default=0.6, metavar="A",
+                   help="'thesis' only: weight of the geometric error against the luminance error (default 0.6)")
+
+
+def add_light(p, *, required: bool = False, help: str = "a point light's position (repeat for several lights)") -> None:
+    """``--light X Y Z``, repeatable (``p`` may be a parser or a mutually exclusive group)."""
+    p.add_argument("--light", type=float, nargs=3, action="append", required=required, default=None, metavar=XYZ,
+                   help=help)
+
+
+def add_colors(p: argparse.ArgumentParser) -> None:
+    """``--color R G B``, repeatable: one per ``--light``."""
+    p.add_argument("--color", type=float, nargs=3, action="append", default=None, metavar=("R", "G", "B"),
+                   help="RGB intensity of each --light, in order (default: the bake's intensity)")
+
+
+def check_colors(colors, lights) -> None:
+    """Refuse a ``--color`` count that is not the ``--light`` count (none is fine)."""
+    if colors is not None and len(colors) != len(lights):
+        raise LodprtError(f"--color: {len(colors)} given for {len(lights)} --light; give one per light or none")
+
+
+def at_least(flag: str, value, low: int, note: str = "") -> None:
+    """Refuse ``flag value`` below ``low`` (``None``, not given, passes)."""
+    if value is not None and value < low:
+        raise LodprtError(f"{flag} {value}: must be >= {low}{note}")
+
+
+def require_suffix(out, suffix: str, *, ignore_case: bool = True) -> Path:
+    """``out`` as a Path; refused unless it ends with ``suffix`` (e.g. ``.png``)."""
+    out = Path(out)
+    if (out.suffix.lower() if ignore_case else out.suffix) != suffix:
+        raise LodprtError(f"{out}: the output must be a {suffix} file")
+    return out
+
+
+def refuse_existing(path, overwrite: bool) -> None:
+    """Refuse to replace an existing ``path`` without ``--overwrite``."""
+    if Path(path).exists() and not overwrite:
+        raise LodprtError(f"{path}: already exists; pass --overwrite to replace it")
+
+
+def new_output(out, suffix: str, overwrite: bool, *, ignore_case: bool = True) -> Path:
+    """An output file: the right suffix, and not an existing file unless ``overwrite``."""
+    out = require_suffix(out, suffix, ignore_case=ignore_case)
+    refuse_existing(out, overwrite)
+    return out

@@ -1,0 +1,215 @@
+"""The display commands of ``lodprt``, each drawn with OpenGL (docs/DISPLAY.md): diff (the light cut's error against
+the full-resolution radiance), render, compare, turntable and view (moving point lights, view cut)."""
+
+from __future__ import annotations
+
+from lodprt.cli import args as cli_args
+from lodprt.cli import environment as environment_cli
+from lodprt.errors import LodprtError
+
+
+def register(sub) -> None:
+    """Add diff, render, compare, turntable and view to ``sub`` (the subparsers object of the lodprt parser)."""
+    _add_diff(sub)
+    _add_render(sub)
+    _add_compare(sub)
+    _add_turntable(sub)
+    _add_view(sub)
+
+
+def _add_view_args(p, output: str | None, *, required: bool = True) -> None:
+    """The arguments of the display commands: store, lights, camera, view cut, drawing, output."""
+    cli_args.add_store(p)
+    cli_args.add_light(p, required=required)
+    cli_args.add_colors(p)
+    cli_args.add_camera(p, eye_required=required, up=True)
+    cli_args.add_view_cut(p)
+    p.add_argument("--full", action="store_true", help="LOD off: draw the full-resolution mesh")
+    p.add_argument("--wireframe", action="store_true", help="overlay the triangles of the cut")
+    p.add_argument("--per-vertex", action="store_true", help="radiance per vertex, interpolated (default: per fragment from interpolated SH)")
+    p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops (tone mapping, default 0)")
+    p.add_argument("--white", type=float, default=None, metavar="L", help="linear radiance shown as white (default: the run time's white point)")
+    p.add_argument("--no-markers", action="store_true", help="do not draw the lights as markers")
+    if output is not None:
+        cli_args.add_output(p, output)
+
+
+def _add_diff(sub) -> None:
+    d = sub.add_parser(
+        "diff",
+        help="picture of the light cut's error against the full-resolution radiance (figures 14-17)",
+        description="Render offscreen (EGL) the completed radiance of light sample K from a cut bake, the "
+        "full-resolution radiance of the same sample (re-baked from the stored scene), and their difference in "
+        "false colour with its scale, side by side, into a PNG.",
+    )
+    cli_args.add_store(d)
+    cli_args.add_sample(d, required=True)
+    cli_args.add_camera(d, size=(640, 480), size_what="each panel's size in pixels")
+    cli_args.add_output(d, "diff.png", "output .png")
+    d.add_argument("--scale", type=float, default=None, metavar="S", help="error that maps to the top of the colour scale (default: the largest)")
+    cli_args.add_device(d, " for the full-resolution re-bake")
+    d.set_defaults(handler=cmd_diff)
+
+
+def _add_render(sub) -> None:
+    rn = sub.add_parser(
+        "render",
+        help="render one frame offscreen (moving lights, view cut) to a PNG or a linear .npy",
+        description="Relight the store with the given point lights, choose the view cut for the camera and draw "
+        "it offscreen (EGL). A .png is tone-mapped sRGB; a .npy is the linear radiance image (H, W, 3) float32, "
+        "background 0, no overlays. Camera: perspective, vertical field of view, right-handed, y up (docs/DISPLAY.md).",
+    )
+    _add_view_args(rn, "frame.png|frame.npy", required=False)
+    rn.add_argument("--environment", default=None, metavar="ENV",
+                    help="OUT is a transfer store (bake --environment): relight it by this environment instead of point "
+                    "lights (as render-environment; 'stored' uses the bake's own)")
+    rn.add_argument("--rotate", type=float, default=0.0, metavar="DEG", help="with --environment: turn it about +y by DEG degrees")
+    rn.set_defaults(handler=cmd_render)
+
+
+def _add_compare(sub) -> None:
+    cp = sub.add_parser(
+        "compare",
+        help="figure: LOD frame, full-resolution frame and their difference side by side (figures 14-17)",
+        description="Render the view-cut frame and the full-resolution frame for the same lights and camera, and "
+        "their per-pixel difference in false colour with its scale, side by side in one PNG.",
+    )
+    _add_view_args(cp, "fig.png")
+    cp.add_argument("--scale", type=float, default=None, metavar="S",
+                    help="difference (relative to white) at the top of the colour scale (default: its 99.5th percentile)")
+    cp.set_defaults(handler=cmd_compare)
+
+
+def _add_turntable(sub) -> None:
+    tt = sub.add_parser(
+        "turntable",
+        help="an orbit of the camera with moving lights: PNG sequence (a folder) or an animated GIF",
+        description="Orbit the camera around the target (and the lights around the vertical axis through it) "
+        "and write every frame: OUT a folder gets frame_0000.png ..., OUT ending in .gif an animated GIF.",
+    )
+    _add_view_args(tt, "DIR|video.gif", required=False)
+    tt.add_argument("--frames", type=int, default=36, metavar="N", help="frames per orbit (default 36)")
+    tt.add_argument("--light-turns", type=float, default=1.0, metavar="T",
+                    help="turns the lights make about the vertical axis per orbit (default 1; 0 keeps them still)")
+    tt.add_argument("--fps", type=float, default=12.0, metavar="F", help="GIF frame rate (default 12)")
+    tt.set_defaults(handler=cmd_turntable)
+
+
+def _add_view(sub) -> None:
+    vw = sub.add_parser(
+        "view",
+        help="interactive viewer (orbit, drag lights, error bound and alpha, wireframe, LOD toggle)",
+        description="Open a window on the store: drag to orbit, right-drag to pan, wheel to zoom, shift-drag to "
+        "move the selected light; keys in docs/DISPLAY.md (H prints them). Needs a display (X11 or Xvfb).",
+    )
+    _add_view_args(vw, None, required=False)
+    vw.add_argument("--frames", type=int, default=None, metavar="N", help="close after N frames (smoke tests)")
+    vw.add_argument("--screenshot", default=None, metavar="PNG", help="save the last frame drawn as a PNG")
+    vw.set_defaults(handler=cmd_view)
+
+
+def _view_setup(args, store):
+    """(lights, colors, Camera) from the display arguments."""
+    from lodprt.runtime.camera import Camera, default_eye, scene_centre
+
+    lights = args.light if args.light else [store.light_positions[store.num_samples // 2].tolist()]
+    colors = args.color
+    cli_args.check_colors(colors, lights)
+    eye = args.eye if args.eye is not None else default_eye(store)
+    target = args.target if args.target is not None else scene_centre(store)
+    camera = Camera(eye=tuple(eye), target=tuple(target), up=tuple(args.up), fov=args.fov, width=args.size[0],
+                    height=args.size[1])
+    return lights, colors, camera
+
+
+def _view_cut(args) -> dict:
+    return {"error_bound": args.error_bound, "alpha": args.alpha, "criterion": args.criterion}
+
+
+def _draw_options(args) -> dict:
+    return {"wireframe": args.wireframe, "per_vertex": args.per_vertex, "exposure": args.exposure,
+            "white": args.white, "light_markers": not args.no_markers}
+
+
+def cmd_diff(args) -> int:
+    from lodprt.devices import resolve_device
+    from lodprt.display.diff import diff_figure
+    from lodprt.store.bake_store import open_store
+
+    out = cli_args.new_output(args.out, ".png", args.overwrite)
+    store = open_store(args.store)
+    store.check_sample(args.sample)
+    numbers = diff_figure(store, args.sample, args.eye, out, target=args.target, size=tuple(args.size), fov=args.fov,
+                          device=resolve_device(args.device), scale=args.scale)
+    print(f"wrote {out}: relative RMSE {numbers['relative_rmse']:.4f}, max {numbers['relative_max']:.4f}, "
+          f"{numbers['vertices_kept']:,} vertices kept")
+    return 0
+
+
+def cmd_render(args) -> int:
+    if args.environment is not None:
+        return _render_environment(args)
+    from lodprt.display.pictures import render_to_file
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    stats = render_to_file(store, args.out, lights=lights, colors=colors, camera=camera, lod=not args.full,
+                           overwrite=args.overwrite, **_view_cut(args), **_draw_options(args))
+    print(f"wrote {args.out}: {stats['triangles']:,} triangles ({'view cut' if stats['lod'] else 'full resolution'}), "
+          f"frame {stats.get('ms_total', 0.0):.0f} ms, draw {stats['ms_draw']:.0f} ms")
+    return 0
+
+
+def _render_environment(args) -> int:
+    """``render OUT --environment ENV``: a transfer store relit by an environment, as render-environment."""
+    if args.light:
+        raise LodprtError("--light and --environment exclude each other (point lights or an environment)")
+    if args.eye is None:
+        raise LodprtError("--environment needs --eye X Y Z")
+    return environment_cli.render_environment(
+        args.store, args.out, eye=args.eye, environment=None if args.environment == "stored" else args.environment,
+        rotate=args.rotate, target=args.target, fov=args.fov, size=args.size, white=args.white,
+        overwrite=args.overwrite)
+
+
+def cmd_compare(args) -> int:
+    from lodprt.display.compare import compare_figure
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    opts = _draw_options(args)
+    opts.pop("light_markers")
+    numbers = compare_figure(store, args.out, lights=lights, colors=colors, camera=camera, overwrite=args.overwrite,
+                             scale=args.scale, markers=not args.no_markers, **_view_cut(args), **opts)
+    print(f"wrote {args.out}: {numbers['triangles_lod']:,} of {numbers['triangles_full']:,} triangles, PSNR "
+          f"{numbers['psnr_db']:.1f} dB, relative RMSE {numbers['relative_rmse']:.4f}")
+    return 0
+
+
+def cmd_turntable(args) -> int:
+    from lodprt.display.pictures import turntable
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    written = turntable(store, args.out, lights=lights, colors=colors, camera=camera, frames=args.frames,
+                        light_turns=args.light_turns, fps=args.fps, lod=not args.full, overwrite=args.overwrite,
+                        **_view_cut(args), **_draw_options(args))
+    print(f"wrote {written}")
+    return 0
+
+
+def cmd_view(args) -> int:
+    from lodprt.display.viewer import run_viewer
+    from lodprt.store.bake_store import open_store
+
+    if args.screenshot is not None:
+        from lodprt.display.pictures import check_output
+
+        check_output(args.screenshot, (".png",), overwrite=True)
+    store = open_store(args.store)
+    lights, colors, camera = _view_setup(args, store)
+    return run_viewer(store, lights=lights, colors=colors, camera=camera, lod=not args.full, frames=args.frames,
+                      screenshot=args.screenshot, **_view_cut(args), **_draw_options(args))

@@ -1,0 +1,133 @@
+"""``lodprt frames``: the view-dependent cut along a camera path, per-frame times and triangles (optionally the image
+error against the full mesh)."""
+
+from __future__ import annotations
+
+import json
+
+from lodprt.cli import args as cli_args
+
+FRAME_KEYS = ("triangles", "active_nodes", "nodes_touched", "refined", "coarsened", "ms_cut", "ms_triangulate",
+              "ms_relight", "ms_total")
+
+
+def register(sub) -> None:
+    """Add ``frames`` to ``sub`` (the subparsers object of the lodprt parser)."""
+    fr = sub.add_parser(
+        "frames",
+        help="run the view-dependent cut along a camera path and report per-frame times and triangles",
+        description="Move the camera along a path around the scene (orbit, or dolly toward the target) while the "
+        "lights circle above it, update the run-time cut every frame (no drawing) and print per-frame "
+        "milliseconds (cut update, triangulation, relighting) and triangle counts.",
+    )
+    cli_args.add_store(fr)
+    fr.add_argument("--path", choices=("orbit", "dolly"), default="orbit", help="camera path (default orbit)")
+    fr.add_argument("--frames", type=int, default=120, metavar="N", help="number of frames (default 120)")
+    cli_args.add_view_cut(fr)
+    fr.add_argument("--triangle-budget", type=int, default=None, metavar="T", help="steer the bound toward this many triangles")
+    cli_args.add_light(fr, help="fixed light position(s) instead of the moving light")
+    cli_args.add_screen(fr, size_what="screen size for e_geo")
+    cli_args.add_device(fr, " of the per-frame kernels")
+    fr.add_argument("--full", action="store_true", help="LOD off: relight the full mesh along the same path (the baseline)")
+    fr.add_argument("--error-every", type=int, default=0, metavar="K",
+                    help="every K frames, draw the frame and the full-mesh frame offscreen (--size) and report the "
+                         "image error (PSNR clipped at white, relative RMSE); 0: never (default)")
+    cli_args.add_json(fr, "one JSON object (frames and a summary) instead of the table")
+    fr.set_defaults(handler=cmd_frames)
+
+
+def cmd_frames(args) -> int:
+    from lodprt.runtime.camera import camera_path
+    from lodprt.store.bake_store import open_store
+
+    cli_args.at_least("--frames", args.frames, 1)
+    cli_args.at_least("--error-every", args.error_every, 0, " (0: no image error)")
+    store = open_store(args.store)
+    rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
+                  triangle_budget=args.triangle_budget, device=args.device, lod=not args.full)
+    errors = _FrameErrors(store, rt) if args.error_every else None
+    rows = []
+    try:
+        for k, (camera, lights) in enumerate(camera_path(rt, args.path, args.frames, size=tuple(args.size),
+                                                         fov=args.fov)):
+            rt.set_camera(camera)
+            rt.set_lights(args.light if args.light else lights)
+            frame = rt.update()
+            s = frame.stats
+            rows.append({"frame": k, **{key: s[key] for key in FRAME_KEYS}})
+            if errors is not None and k % args.error_every == 0:
+                rows[-1].update(errors.measure(frame))
+    finally:
+        if errors is not None:
+            errors.close()
+    summary = _frames_summary(args, rt, store, rows)
+    if args.json:
+        print(json.dumps({"summary": summary, "frames": rows}, indent=2))
+        return 0
+    _print_frames(rows, summary, rt)
+    return 0
+
+
+def _runtime(store, **options):
+    """``Runtime(store, **options)`` with a progress bar on stderr while the light samples are completed."""
+    from lodprt.cli.progress import with_progress
+    from lodprt.runtime.session import Runtime
+
+    return with_progress(store.num_samples, "completing light samples", "sample",
+                         lambda progress: Runtime(store, progress=progress, **options))
+
+
+class _FrameErrors:
+    """The image error of run-time frames against the full mesh under the same camera and lights."""
+
+    def __init__(self, store, rt):
+        from lodprt.display.render import Renderer
+
+        self.store, self.rt = store, rt
+        self.renderer = Renderer()
+
+    def measure(self, frame) -> dict:
+        from lodprt.display.compare import frame_error
+        from lodprt.runtime.frames import full_frame
+
+        full = full_frame(self.store, frame.camera, lights=frame.lights, colors=frame.light_colors)
+        numbers, _, _ = frame_error(self.renderer, frame, full, self.rt.white)
+        return {"psnr_db": numbers["psnr_db"], "relative_rmse": numbers["relative_rmse"]}
+
+    def close(self) -> None:
+        self.renderer.release()
+
+
+def _frames_summary(args, rt, store, rows) -> dict:
+    import numpy as np
+
+    ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
+    tris = np.array([r["triangles"] for r in rows])
+    summary = {"frames": len(rows), "path": args.path, "lod": not args.full, "criterion": rt.criterion,
+               "error_bound": rt.error_bound, "alpha": args.alpha, "first_frame_ms": rows[0]["ms_total"],
+               "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
+               "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
+               "device": rt.device}
+    psnr = [r["psnr_db"] for r in rows if "psnr_db" in r]
+    if psnr:
+        summary["median_psnr_db"] = float(np.median(psnr))
+        summary["min_psnr_db"] = float(np.min(psnr))
+        summary["median_relative_rmse"] = float(np.median([r["relative_rmse"] for r in rows if "psnr_db" in r]))
+    return summary
+
+
+def _print_frames(rows, summary, rt) -> None:
+    has_err = "median_psnr_db" in summary
+    print(f"{'frame':>5} {'triangles':>9} {'touched':>8} {'cut ms':>7} {'tri ms':>7} {'light ms':>8} {'total ms':>8}"
+          + (f" {'PSNR dB':>8}" if has_err else ""))
+    for r in rows:
+        err = f" {r['psnr_db']:>8.1f}" if "psnr_db" in r else (" " * 9 if has_err else "")
+        print(f"{r['frame']:>5} {r['triangles']:>9,} {r['nodes_touched']:>8,} {r['ms_cut']:>7.2f} "
+              f"{r['ms_triangulate']:>7.2f} {r['ms_relight']:>8.2f} {r['ms_total']:>8.2f}{err}")
+    what = "full mesh" if not summary["lod"] else f"{rt.criterion} criterion, bound {rt.error_bound:g}"
+    print(f"{what}: median {summary['median_ms']:.2f} ms per frame after the first "
+          f"({summary['first_frame_ms']:.0f} ms), p95 {summary['p95_ms']:.2f} ms; median "
+          f"{summary['median_triangles']:,.0f} triangles of {summary['full_triangles']:,} on {rt.device}")
+    if has_err:
+        print(f"image error against the full mesh: median PSNR {summary['median_psnr_db']:.1f} dB (worst "
+              f"{summary['min_psnr_db']:.1f}), median relative RMSE {summary['median_relative_rmse']:.4f}")

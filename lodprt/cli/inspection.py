@@ -1,0 +1,88 @@
+"""``lodprt info`` and ``radiance``: what a bake store holds and the radiance it reconstructs toward an eye."""
+
+from __future__ import annotations
+
+import json
+
+from lodprt.cli import args as cli_args
+from lodprt.errors import LodprtError
+
+
+def register(sub) -> None:
+    """Add info and radiance to ``sub`` (the subparsers object of the lodprt parser)."""
+    _add_info(sub)
+    _add_radiance(sub)
+
+
+def _add_info(sub) -> None:
+    i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds.")
+    cli_args.add_store(i)
+    cli_args.add_json(i, "a JSON object (vertices, sh_order, bake_seconds, samples, ...)")
+    i.set_defaults(handler=cmd_info)
+
+
+def _add_radiance(sub) -> None:
+    r = sub.add_parser(
+        "radiance",
+        help="radiance toward an eye for every vertex, from a light sample or arbitrary point lights",
+        description="Reconstruct the radiance toward the eye of every scene vertex (store order) and save it as "
+        "a (V, 3) float32 .npy (linear RGB): either of light sample K (--sample) or of point lights anywhere in "
+        "the sampled region (--light, repeatable; interpolated from the 8 nearest samples, T-12, and summed). "
+        "Vertices the light cut did not keep are completed from their pre-collapse neighbours (T-15).",
+    )
+    cli_args.add_store(r)
+    which = r.add_mutually_exclusive_group(required=True)
+    cli_args.add_sample(which)
+    cli_args.add_light(which)
+    cli_args.add_colors(r)
+    r.add_argument("--outside", choices=("clamp", "error"), default="clamp",
+                   help="a light outside the sampled region: clamp it into the region with a warning (default) or refuse")
+    cli_args.add_eye(r)
+    cli_args.add_output(r, "rad.npy", "output .npy")
+    r.set_defaults(handler=cmd_radiance)
+
+
+def cmd_info(args) -> int:
+    from lodprt.store.bake_store import open_store
+
+    info = open_store(args.store).info()
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    mode = info["mode"] + (f", threshold {info['threshold_deg']} deg" if info.get("threshold_deg") is not None else "")
+    print(f"{args.store}: lodprt store v{info['format_version']} ({mode}) from {info['source']}")
+    print(f"  vertices {info['vertices']:,}, triangles {info['faces']:,}")
+    print(
+        f"  SH order {info['sh_order']}: {info['coefficients_per_vertex']} coefficient(s) x {info['channels']} channel(s)"
+    )
+    if info["hierarchy_nodes"] is not None:
+        print(f"  hierarchy {info['hierarchy_nodes']:,} nodes, {info['hierarchy_roots']:,} roots, depth "
+              f"{info['hierarchy_depth']}, built in {info['hierarchy_seconds']:.1f} s")
+    print(f"  bake {info['bake_seconds']:.2f} s on {info['device']}; {info['bytes_total'] / 1024:,.0f} KiB payload, "
+          f"{info['bytes_on_disk'] / 1024:,.0f} KiB on disk")
+    print(f"  {'sample':>6} {'position':>30} {'kept':>9} {'lit':>9} {'shadowed':>9} {'KiB':>9}")
+    for s in info["samples"]:
+        pos = "(" + ", ".join(f"{x:.3g}" for x in s["position"]) + ")"
+        print(f"  {s['index']:>6} {pos:>30} {s['vertices_kept']:>9,} {s['lit']:>9,} {s['shadowed']:>9,} {s['bytes'] / 1024:>9,.0f}")
+    return 0
+
+
+def cmd_radiance(args) -> int:
+    import numpy as np
+
+    from lodprt.store.bake_store import open_store
+
+    out = cli_args.new_output(args.out, ".npy", args.overwrite, ignore_case=False)
+    store = open_store(args.store)
+    if args.sample is not None:
+        if args.color:
+            raise LodprtError("--color goes with --light, not with --sample")
+        rad = store.radiance(args.sample, args.eye)
+    else:
+        cli_args.check_colors(args.color, args.light)
+        from lodprt.runtime.frames import light_radiance
+
+        rad = light_radiance(store, args.light, args.eye, colors=args.color, outside=args.outside)
+    np.save(out, rad)
+    print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
+    return 0

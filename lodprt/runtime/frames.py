@@ -1,0 +1,148 @@
+"""Frames: what the run time hands the display (``Frame``), and frames made without a view cut: full-resolution
+frames of a store (``full_frame``, ``StoreFrames`` for stores without a hierarchy) and the completed coefficients
+or radiance under arbitrary point lights (T-12 interpolation, T-15 completion, T-7)."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+
+import numpy as np
+
+from lodprt.runtime.camera import Camera
+from lodprt.runtime.lights import LightInterpolator, check_lights
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass
+class Frame:
+    """What one ``Runtime.update()`` produces for the display (all arrays are fresh copies).
+
+    vertex_ids (A,) int32 original vertex of each active node (store vertex order);
+    positions (A, 3) float32 and normals (A, 3) float32 of those vertices;
+    triangles (M, 3) int32 indices into ``positions`` (the view cut's mesh, degenerate faces dropped);
+    coefficients (A, 3, ncoef) float32 SH coefficients over the view direction of the outgoing radiance, RGB,
+    every light's interpolated and completed coefficients summed with its intensity applied (linear radiance);
+    radiance (A, 3) float32 linear RGB radiance toward ``camera.eye`` (T-7 per vertex);
+    lights (L, 3) float64 light positions as used (after clamping), light_colors (L, 3) float64 RGB intensities;
+    camera the ``Camera``; stats a dict (triangles, active_nodes, nodes_touched, refined, coarsened, ms_cut,
+    ms_triangulate, ms_relight, ms_total, ...).
+    """
+
+    vertex_ids: np.ndarray
+    positions: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray
+    coefficients: np.ndarray
+    radiance: np.ndarray
+    lights: np.ndarray
+    light_colors: np.ndarray
+    camera: Camera
+    stats: dict
+
+
+def display(radiance_over_white):
+    """The screen intensity of a radiance in units of the white point as the thesis counts it (3.4.2.2): values
+    above 1 show as 1, below 0 as 0, i.e. clip(x, 0, 1) (linear: no display gamma)."""
+    return np.clip(np.asarray(radiance_over_white, np.float64), 0.0, 1.0)
+
+
+def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", outside: str = "clamp"):
+    """The completed coefficients of every vertex of ``store`` under point lights at (L, 3) positions, without a
+    ``Runtime`` (stores baked without a hierarchy too): T-12 interpolation, T-15 completion, lights summed with
+    their RGB intensities (``colors`` (L, 3) or one (3,) for all; default the bake's). Returns (lights clamped
+    into the sampled region (L, 3), colours (L, 3), coefficients (V, 3, ncoef) float64)."""
+    interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting=weighting,
+                               outside=outside)
+    pos, col = check_lights(lights, colors, store.intensity)
+    pos, _ = interp.clamp(pos)
+    W = interp.rgb_weights(pos, col)
+    # as wide as the stored coefficients: 1 (y_0 of a diffuse-only store) or order^2
+    out = np.zeros((store.num_vertices, 3, store.coefficients_per_vertex))
+    for j in np.flatnonzero(np.abs(W).sum(1) > 0):
+        c = store.coefficients(int(j))  # (V, C, ncoef), completed; C = 1 (grey) broadcasts over R, G, B
+        out += c * W[j][None, :, None]
+    return pos, col, out
+
+
+def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp") -> np.ndarray:
+    """(V, 3) float32 radiance toward ``eye`` of every vertex of ``store`` under point lights (``light_coefficients``;
+    ``Runtime.radiance`` gives the same numbers)."""
+    from lodprt.store.bake_store import radiance_toward
+
+    _, _, coeffs = light_coefficients(store, lights, colors=colors, weighting=weighting, outside=outside)
+    return radiance_toward(store.positions, store.normals, coeffs, eye, np.ones(3))
+
+
+def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = None):
+    """A ``lodprt.runtime.Frame`` with every referenced vertex of ``store`` and its completed coefficients.
+
+    Either ``sample`` (one light exactly at light sample K, that sample's coefficients) or ``lights`` (L, 3)
+    positions, each interpolated from its nearest samples (``lodprt.runtime.light_coefficients``: the run time's
+    T-12 weights, clamped into the sampled region). ``colors`` (L, 3) RGB
+    intensities (default the store's); the frame's coefficients carry them (linear radiance).
+    """
+    from lodprt.store.bake_store import radiance_toward
+
+    faces = store.faces
+    ids = np.unique(faces.ravel()).astype(np.int32)
+    remap = np.full(store.num_vertices, -1, np.int64)
+    remap[ids] = np.arange(len(ids))
+    if sample is not None:
+        store.check_sample(sample)
+        lights, colors = check_lights(store.light_positions[sample], colors, store.intensity)
+        coeffs = store.coefficients(sample)[ids] * colors[0][None, :, None]
+    else:
+        lights, colors, coeffs = light_coefficients(store, lights, colors=colors)
+        coeffs = coeffs[ids]
+    pos = store.positions[ids].astype(np.float32)
+    nrm = store.normals[ids].astype(np.float32)
+    rad = radiance_toward(pos, nrm, coeffs, camera.eye, np.ones(3))
+    return Frame(vertex_ids=ids, positions=pos, normals=nrm, triangles=remap[faces].astype(np.int32),
+                 coefficients=coeffs.astype(np.float32), radiance=rad, lights=lights.copy(),
+                 light_colors=colors.copy(), camera=camera,
+                 stats={"triangles": len(faces), "active_nodes": len(ids), "lod": False})
+
+
+class StoreFrames:
+    """The ``Runtime`` interface (set_lights, set_camera, set_lod, set_error_bound, update) over ``full_frame``,
+    for stores baked without a hierarchy: always full resolution (no view cut)."""
+
+    lod = False
+
+    def __init__(self, store):
+        self.store = store
+        self.white = None
+        self.camera = None
+        self._lights = store.light_positions[store.num_samples // 2][None, :]
+        self._colors = None
+
+    def set_lights(self, positions, colors=None) -> None:
+        self._lights, self._colors = np.asarray(positions, np.float64).reshape(-1, 3), colors
+
+    def set_camera(self, camera) -> None:
+        self.camera = camera
+
+    def set_lod(self, enabled: bool) -> None:
+        if enabled:
+            log.warning("%s has no hierarchy: LOD is not available, showing full resolution", self.store.path)
+
+    def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
+        pass
+
+    def update(self):
+        t0 = time.perf_counter()
+        frame = full_frame(self.store, self.camera, lights=self._lights, colors=self._colors)
+        if self.white is None:
+            self.white = auto_white(frame.radiance)
+        frame.stats["ms_total"] = 1e3 * (time.perf_counter() - t0)
+        return frame
+
+
+def auto_white(radiance) -> float:
+    """The default white point: 99th percentile of the positive entries of ``radiance`` (1 when there are none)."""
+    r = np.asarray(radiance, np.float64)
+    pos = r[r > 0]
+    return float(np.percentile(pos, 99)) if pos.size else 1.0

@@ -1,0 +1,84 @@
+"""Per-node bounds the view cut reads every frame, made once per store and white point: the T-14 coefficient
+boxes (e_lumi) and the S-2 detail bounds (the screen criterion), per light sample and coefficient, bottom-up over
+the vertex hierarchy (docs/RUNTIME.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lodprt.model.completion import CHUNK
+from lodprt.model.hierarchy import node_heights
+
+
+def detail_bounds(h, coeffs: np.ndarray, white: float, plan, faces: np.ndarray, levels: list) -> np.ndarray:
+    """S-2 per light sample: for each internal node, the largest of (a) |C(v) - sum_j w_j C(q_j)| over the
+    collapses in its subtree (T-15 weights over the ring the collapse removed v from) and (b) |C(v) - C(q)|
+    over its leaves v and their original neighbours q, per coefficient, in units of ``white``:
+    (N - V, S, C, ncoef) float16. (a) is zero where the completed field is linear (T-15 has linear precision);
+    (b) is one edge's step, small on smooth fields and large at a shadow or highlight boundary that runs next
+    to the subtree (between two subtrees, where neither's own collapses see it)."""
+    V, N = h.num_vertices, h.num_nodes
+    _, S, C, n = coeffs.shape
+    detail = np.zeros((N - V, S, C, n), np.float16)
+    if N == V:
+        return detail
+    c0, c1 = h.children[:, 0], h.children[:, 1]
+    big = float(np.finfo(np.float16).max)
+    ring_v, ring_q, starts = leaf_rings(faces)
+    for j in range(S):
+        c = coeffs[:, j].reshape(V, C * n) / np.float32(white)
+        d = np.zeros((N, C * n), np.float32)
+        if len(ring_v):  # leaves: the largest step to an original neighbour (a shadow edge between subtrees)
+            d[ring_v[starts]] = np.maximum.reduceat(np.abs(c[ring_v] - c[ring_q]), starts, axis=0)
+        for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
+            rows = slice(start, min(start + CHUNK, N - V))
+            r = max(int(plan.ring_len[rows].max()), 1)
+            interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
+            d[V + rows.start:V + rows.stop] = np.abs(c[plan.vertex[rows]] - interp)  # T-15 residual
+        for nodes in levels:
+            d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
+        detail[:, j] = np.clip(d[V:], 0, big).reshape(N - V, C, n)
+    return detail
+
+
+def leaf_rings(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every original edge in both directions, sorted by its first vertex: (v, q, start of each v's run)."""
+    f = faces
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    e = np.concatenate([e, e[:, ::-1]])
+    e = e[e[:, 0] != e[:, 1]]
+    e = e[np.argsort(e[:, 0], kind="stable")]
+    starts = np.flatnonzero(np.r_[True, e[1:, 0] != e[:-1, 0]]) if len(e) else np.zeros(0, np.int64)
+    return e[:, 0], e[:, 1], starts
+
+
+def height_levels(h) -> list[np.ndarray]:
+    """Internal nodes grouped by height (children always on lower levels), lowest first."""
+    hk = node_heights(h)
+    order = np.argsort(hk, kind="stable")
+    bounds = np.searchsorted(hk[order], np.arange(1, hk.max() + 2)) if len(hk) else np.zeros(1, np.int64)
+    return [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
+
+
+def coefficient_boxes(h, coeffs: np.ndarray, white: float, levels: list) -> tuple[np.ndarray, np.ndarray]:
+    """Per light sample, the box of every completed coefficient over each internal node's leaves, in units of
+    ``white``: centre and half-width, each (N - V, S, C, ncoef) float16 (clipped to float16's range), made
+    bottom-up one height level at a time (children always sit on lower levels)."""
+    V, N = h.num_vertices, h.num_nodes
+    _, S, C, n = coeffs.shape
+    centre = np.zeros((N - V, S, C, n), np.float16)
+    half = np.zeros((N - V, S, C, n), np.float16)
+    if N == V:
+        return centre, half
+    c0, c1 = h.children[:, 0], h.children[:, 1]
+    big = float(np.finfo(np.float16).max)
+    for j in range(S):
+        mn = np.empty((N, C * n), np.float32)
+        mn[:V] = coeffs[:, j].reshape(V, C * n) / np.float32(white)
+        mx = mn.copy()
+        for nodes in levels:
+            mn[nodes] = np.minimum(mn[c0[nodes]], mn[c1[nodes]])
+            mx[nodes] = np.maximum(mx[c0[nodes]], mx[c1[nodes]])
+        centre[:, j] = np.clip(0.5 * (mx[V:] + mn[V:]), -big, big).reshape(N - V, C, n)
+        half[:, j] = np.clip(0.5 * (mx[V:] - mn[V:]), 0, big).reshape(N - V, C, n)
+    return centre, half
