@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 
 from lodprt.cli import bake, display, environment, frames, inspection
@@ -42,6 +43,9 @@ def main(argv: list[str] | None = None) -> int:
     except LodprtError as exc:
         print(f"lodprt {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader went away (lodprt info ... | head): stop quietly, as Unix tools do
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":
