@@ -1,7 +1,7 @@
-"""Per-frame run-time kernels (SPEC 5; thesis 3.4): view-cut errors of candidate nodes (T-13, T-14) and
-relighting of the active vertices from interpolated light samples (T-12, T-7).
+"""Per-frame run-time kernels (SPEC 5; thesis 3.4): view-cut errors of candidate nodes (T-13; T-14 or S-1/S-2)
+and relighting of the active vertices from interpolated light samples (T-12, T-7).
 
-The float64 numpy versions in ``lodprt.runtime.session`` (``Runtime.node_errors_reference``, ``Runtime.coefficients``)
+The float64 numpy versions (``lodprt.runtime.errors_reference.node_errors_reference``, ``Runtime.coefficients``)
 compute the same quantities and are the tests' reference.
 """
 

@@ -145,3 +145,15 @@ def test_no_private_name_crosses_modules():
            for name, path in known.items() for t, names, line in imports(path, name)
            if t.startswith("lodprt") and t != name for n in names if n.startswith("_") and not n.startswith("__")]
     assert not bad, "\n".join(bad)
+
+
+def test_public_api_resolves_and_open_is_deprecated():
+    """Every documented top-level name imports (lazily) from its stage; ``lodprt.open`` still works, with a
+    DeprecationWarning, and is ``open_store``; ``lodprt.bake`` is the bake function, not a module."""
+    import lodprt
+
+    for name in lodprt.__all__:
+        assert getattr(lodprt, name) is not None, name
+    with pytest.warns(DeprecationWarning, match="open_store"):
+        assert lodprt.open is lodprt.open_store
+    assert callable(lodprt.bake) and lodprt.bake.__module__ == "lodprt.precompute.bake"

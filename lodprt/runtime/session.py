@@ -1,37 +1,14 @@
-"""Run time (SPEC 5; thesis 3.4, eq. 12-15; seed 003 section 5): relight a baked scene with moving point lights
-and choose a view-dependent cut of the vertex hierarchy every frame.
+"""The ``Runtime`` (SPEC 5; thesis 3.4, T-12..T-15; seed 003 section 5; S-1, S-2 beyond the thesis): relight a
+baked scene with moving point lights and move a view-dependent cut of the vertex hierarchy every frame.
 
-    rt = lodprt.open("bunny.zarr").runtime(error_bound=0.25, alpha=0.6)
+    rt = lodprt.Runtime(lodprt.open_store("bunny.zarr"))          # criterion "screen", bound 0.2 of white
     rt.set_lights([(0.1, 0.28, 0.0)], colors=[(1.0, 0.9, 0.8)])
-    rt.set_camera(eye=(0, 0.3, 0.6), target=(0, 0.1, 0), fov=40, width=800, height=600)
+    rt.set_camera((0, 0.3, 0.6), (0, 0.1, 0), fov=40, width=800, height=600)
     frame = rt.update()          # Frame: positions, triangles, coefficients, radiance, stats
 
-What a frame does (docs/RUNTIME.md has the full story):
-
-1. **Lights** (T-12, ``lodprt.runtime.lights``): every light's weights over the light samples; the per-sample RGB factors
-   ``W[j, c] = sum_l I_lc w_lj`` (several lights add, thesis 3.4.1).
-2. **View cut** (T-13, T-14; seed 003 section 5): the cut of the vertex hierarchy is kept from frame to frame and
-   only moved. Refine-Candidates are the active internal nodes, Coarsen-Candidates the nodes whose two children
-   are both active. A candidate is *culled* when its normal cone faces away from the eye (T-13, widened by the
-   angle its bounding sphere subtends) or its bounding sphere lies outside the view frustum; otherwise its error
-   is ``alpha e_geo + (1 - alpha) e_lumi`` (T-14). Ready-to-refine: an active node, not culled, error above the
-   bound; ready-to-coarsen: a Coarsen-Candidate that is culled or whose error is at most the bound. Splits whose
-   El-Sana-Varshney dependencies are unmet are forced (their blockers split first, ``Cut.force_refine``);
-   collapses whose dependencies are unmet wait. A frame makes up to ``max_passes`` such passes over the
-   candidates (each pass costs the size of the cut, not of the mesh); the first frame converges from the base.
-3. **Triangulation** of the cut (original faces through the active ancestors, degenerate ones dropped).
-4. **Relighting**: the active vertices' completed coefficients, ``sum_j W[j, c] C_j`` (the light samples are
-   completed once, T-15, when the Runtime is made), and the radiance toward the eye (T-7).
-
-Errors (T-14): ``e_geo`` is the screen-space length of the node's error vector ``p - p'`` (both ends projected
-with the camera; an end behind the eye counts as 1) over the screen diagonal, clamped to [0, 1]. ``e_lumi`` is the
-spread (max - min) of the leaf radiances under the node for the current view and lights as the thesis counts
-screen intensities (3.4.2.2: in units of the white ``white``, clipped to [0, 1]): ``display(L) = clip(L / white,
-0, 1)``. It is bounded from per-node data made once: for each light sample the box (centre and half-width over the
-node's leaves) of every SH coefficient, so that the leaves' radiance toward ``v`` (the direction from the node to
-the eye) lies in ``[lo, hi] = sum_j W[j, c] sum_i (centre_jci y_i(v) -+ half_jci |y_i(v)|)`` for any light
-interpolated from those samples (weights >= 0), and ``e_lumi = max_c display(hi_c) - display(lo_c)`` is at least
-the true spread toward ``v``. It costs O(samples x coefficients) per candidate instead of a pass over the leaves.
+A frame: light weights (T-12), refine/coarsen passes over the cut's candidates with errors from the Warp kernel
+``kernels.runtime.view_errors`` (T-13 culling; S-1/S-2 or T-14), incremental triangulation, relighting of the
+active vertices (T-7). The equations and the measured behaviour are in docs/RUNTIME.md and docs/THEORY.md.
 """
 
 from __future__ import annotations
