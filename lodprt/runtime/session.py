@@ -63,8 +63,8 @@ class NodeErrors(typing.NamedTuple):
 class Runtime:
     """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
 
-    criterion: "screen" (default; S-1: the luminance spread a node could show, weighted by the pixels it
-    covers, and its geometric error in pixels against ``pixel_tolerance``, each against its own bound) or
+    criterion: "screen" (default; S-1: the shading a coarse node could get wrong (S-2), weighted by the pixels it
+    covers, and its geometric error in pixels at ``pixel_tolerance`` per default bound, each against the bound) or
     "thesis" (T-14: ``alpha e_geo + (1 - alpha) e_lumi``); error_bound: refine above, coarsen at or below (None:
     the criterion's default, DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs
     e_geo against e_lumi (T-14 only);
@@ -126,7 +126,8 @@ class Runtime:
         self.white = float(white) if white is not None else self._default_white()
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
-        self._boxes = None  # per-node coefficient boxes for e_lumi, made when the view cut first needs them
+        self._bounds: dict[str, np.ndarray] = {}
+        self._levels = None  # internal nodes by height, for the bounds  # per-node bounds, each made when the view cut first needs it
         # per-node geometry for the error terms
         self.node_pos = self.positions[h.vertex]
         internal = h.children[:, 1] >= 0
@@ -161,29 +162,51 @@ class Runtime:
     # -- set-up ------------------------------------------------------------------------------------------------
     @property
     def box_centre(self) -> np.ndarray:
-        return self._ensure_boxes()[0]
+        """T-14 coefficient box centres (N - V, S, C, ncoef) float16 (``node_bounds.coefficient_boxes``)."""
+        return self._node_bounds("box_centre")
 
     @property
     def box_half(self) -> np.ndarray:
-        return self._ensure_boxes()[1]
+        """T-14 coefficient box half-widths (N - V, S, C, ncoef) float16."""
+        return self._node_bounds("box_half")
 
     @property
     def detail(self) -> np.ndarray:
         """S-2 detail bounds (N - V, S, C, ncoef) float16 (``lodprt.runtime.node_bounds.detail_bounds``)."""
-        return self._ensure_boxes()[2]
+        return self._node_bounds("detail")
 
-    def _ensure_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if self._boxes is None:
-            levels = node_bounds.height_levels(self.h)
-            centre, half = node_bounds.coefficient_boxes(self.h, self.coeffs, self.white, levels)
-            detail = node_bounds.detail_bounds(self.h, self.coeffs, self.white, self.store.completion_plan(),
-                                               self.faces, levels)
-            wp = self._wp
-            self._d["box_centre"] = wp.array(centre, dtype=wp.float16, device=self.device)
-            self._d["box_half"] = wp.array(half, dtype=wp.float16, device=self.device)
-            self._d["detail"] = wp.array(detail, dtype=wp.float16, device=self.device)
-            self._boxes = centre, half, detail
-        return self._boxes
+    def _node_bounds(self, name: str) -> np.ndarray:
+        """One of the per-node bounds, made (and put on the device) the first time it is asked for: the screen
+        criterion's frames need only ``detail``, T-14's only the boxes."""
+        if name not in self._bounds:
+            if self._levels is None:
+                self._levels = node_bounds.height_levels(self.h)
+            if name == "detail":
+                made = {"detail": node_bounds.detail_bounds(self.h, self.coeffs, self.white,
+                                                            self.store.completion_plan(), self.faces, self._levels)}
+            else:
+                centre, half = node_bounds.coefficient_boxes(self.h, self.coeffs, self.white, self._levels)
+                made = {"box_centre": centre, "box_half": half}
+            for key, value in made.items():
+                self._bounds[key] = value
+                self._d[key] = self._wp.array(value, dtype=self._wp.float16, device=self.device)
+        return self._bounds[name]
+
+    def _kernel_bounds(self, exact: bool) -> list:
+        """The view_errors kernel's box_centre, box_half and detail arrays: the ones its criterion reads (and the
+        boxes too when ``exact``, which evaluates every term); a one-row placeholder of the same width for the
+        others, which the kernel then never indexes."""
+        need = {"detail"} if self.criterion == "screen" else {"box_centre", "box_half"}
+        if exact:
+            need |= {"box_centre", "box_half"}
+        if "placeholder" not in self._d:
+            self._d["placeholder"] = self._wp.zeros((1, 1, 1, self.ncoef), dtype=self._wp.float16, device=self.device)
+        out = []
+        for name in ("box_centre", "box_half", "detail"):
+            if name in need:
+                self._node_bounds(name)
+            out.append(self._d[name] if name in need else self._d["placeholder"])
+        return out
 
     def _upload(self) -> None:
         """The per-frame kernels' read-only inputs, on the device once."""
@@ -230,7 +253,7 @@ class Runtime:
         return float(np.percentile(pos, 99)) if pos.size else 1.0
 
     def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
-        """T-14 error bound (>= 0) and, when given, alpha in [0, 1]."""
+        """The criterion's error bound (>= 0) and, when given, alpha in [0, 1] (T-14's weight of e_geo)."""
         e = float(error_bound)
         if not e >= 0 or not math.isfinite(e):
             raise LodprtError(f"error_bound {error_bound}: must be a finite number >= 0")
@@ -280,9 +303,9 @@ class Runtime:
 
     # -- errors ------------------------------------------------------------------------------------------------
     def node_errors(self, nodes, *, exact: bool = True) -> NodeErrors:
-        """For internal ``nodes`` (K,): culled (K,) bool (T-13 back-facing or outside the frustum), error (K,)
-        ``alpha e_geo + (1 - alpha) e_lumi`` (T-14), e_geo (K,), e_lumi (K,) (all 0 where culled: a culled node
-        is coarsened whatever its error); float32 Warp kernel
+        """For internal ``nodes`` (K,), a ``NodeErrors``: culled (T-13 back-facing or outside the frustum), the
+        criterion's error (S-1 or T-14), e_geo, e_lumi, footprint, e_detail (all 0 where culled: a culled node is
+        coarsened whatever its error); float32 Warp kernel
         (``lodprt.kernels.runtime.view_errors``) on the Runtime's device. ``exact=False`` (the frame loop) stops a
         node's evaluation once its refine/coarsen decision is known: its error is then an upper bound when at or
         under the bound, and e_lumi / e_detail read -1 where they were not needed."""
@@ -297,14 +320,14 @@ class Runtime:
         if K:
             cam = self.camera
             used, weights = self._frame_inputs()
-            self._ensure_boxes()
+            bounds = self._kernel_bounds(exact)
             self._launch(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
                 d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
-                d["box_centre"], d["box_half"], d["detail"], CRITERIA.index(self.criterion), int(bool(exact)),
+                *bounds, CRITERIA.index(self.criterion), int(bool(exact)),
                 float(self.error_bound), self.geo_rate(), self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
         culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
