@@ -8,7 +8,7 @@ light samples in the default box, SH order 4, light cut at 5 degrees (the bake's
 an orbit of the camera (``lodprt.runtime.camera_path``, 400 x 300, light circling above) with the median frame time
 of ``Runtime.update()`` (cut + triangulation + relighting, after the first frame) and triangles; every 8th frame
 drawn by ``lodprt.render.Renderer`` against the full-mesh frame of the same camera and lights
-(``lodprt.compare.frame_error``: PSNR clipped at white, relative RMSE). Baseline in the same run: the full mesh
+(``lodprt.display.compare.error_against_full``: PSNR clipped at white, relative RMSE). Baseline in the same run: the full mesh
 relit along the same orbit (LOD off). Writes ``benchmarks/results/view_cut.json`` and ``view_cut.png`` (error
 against time, one panel per scene).
 """
@@ -41,8 +41,7 @@ def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
 
 def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
     """Median ms and triangles along the orbit, and the image error of every ``every``-th frame."""
-    from lodprt.display.compare import frame_error
-    from lodprt.runtime.frames import full_frame
+    from lodprt.display.compare import error_against_full
     from lodprt.runtime.camera import camera_path
 
     ms, tris, psnr, rmse = [], [], [], []
@@ -54,8 +53,7 @@ def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
             ms.append(f.stats["ms_total"])
             tris.append(f.stats["triangles"])
         if renderer is not None and k % every == 0:
-            full = full_frame(store, cam, lights=f.lights, colors=f.light_colors)
-            numbers, _, _ = frame_error(renderer, f, full, rt.white)
+            numbers = error_against_full(renderer, store, f, rt.white)
             psnr.append(min(numbers["psnr_db"], 100.0))
             rmse.append(numbers["relative_rmse"])
     out = {"median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),

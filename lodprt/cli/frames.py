@@ -87,11 +87,9 @@ class _FrameErrors:
         self.renderer = Renderer()
 
     def measure(self, frame) -> dict:
-        from lodprt.display.compare import frame_error
-        from lodprt.runtime.frames import full_frame
+        from lodprt.display.compare import error_against_full
 
-        full = full_frame(self.store, frame.camera, lights=frame.lights, colors=frame.light_colors)
-        numbers, _, _ = frame_error(self.renderer, frame, full, self.rt.white)
+        numbers = error_against_full(self.renderer, self.store, frame, self.rt.white)
         return {"psnr_db": numbers["psnr_db"], "relative_rmse": numbers["relative_rmse"]}
 
     def close(self) -> None:

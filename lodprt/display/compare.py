@@ -7,7 +7,7 @@ import numpy as np
 
 from lodprt.display.pictures import check_output
 from lodprt.display.render import Renderer
-from lodprt.runtime.frames import auto_white
+from lodprt.runtime.frames import auto_white, full_frame
 from lodprt.runtime.session import frame_source
 
 
@@ -89,3 +89,10 @@ def frame_error(renderer, lod, full, white: float, *, per_vertex: bool = False) 
     numbers = {"psnr_db": psnr, "relative_rmse": rmse, "mean_difference": float(diff.mean()) if diff.size else 0.0,
                "max_difference": float(rel.max()) if rel.size else 0.0}
     return numbers, rel, covered
+
+
+def error_against_full(renderer, store, frame, white: float) -> dict:
+    """``frame_error``'s numbers for a run-time ``frame`` against the full-resolution frame of ``store`` under the
+    same camera and lights (``lodprt.runtime.frames.full_frame``)."""
+    full = full_frame(store, frame.camera, lights=frame.lights, colors=frame.light_colors)
+    return frame_error(renderer, frame, full, white)[0]
