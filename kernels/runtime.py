@@ -20,15 +20,13 @@ def display(x: float):
 
 @wp.func
 def detail_bound(
-    k: int,  # In: row of basis
     row: int,  # In: the node's row in detail
     used: wp.array(dtype=wp.int32),
     weights: wp.array2d(dtype=wp.float32),
-    detail: wp.array4d(dtype=wp.float16),
-    basis: wp.array2d(dtype=wp.float32),
-    ncoef: int,
+    detail: wp.array3d(dtype=wp.float32),
 ):
-    """S-2: max over RGB of sum_j |W_jc| sum_i D_jci |y_i| (units of white, at most 1)."""
+    """S-2: max over RGB of sum_j |W_jc| D_jc (units of white, at most 1); D_jc bounds the radiance the subtree's
+    completion could miss toward any view direction (``lodprt.runtime.node_bounds.detail_bounds``)."""
     channels = detail.shape[2]
     dr = float(0.0)
     dg = float(0.0)
@@ -36,9 +34,7 @@ def detail_bound(
     for u in range(used.shape[0]):
         j = used[u]
         for c in range(channels):
-            det = float(0.0)
-            for i in range(ncoef):
-                det += wp.float32(detail[row, j, c, i]) * wp.abs(basis[k, i])
+            det = detail[row, j, c]
             if channels == 1 or c == 0:
                 dr += det * wp.abs(weights[j, 0])
             if channels == 1 or c == 1:
@@ -111,7 +107,7 @@ def view_errors(
     weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample (T-12, intensities)
     box_centre: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box centre / white per node
     box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
-    detail: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) largest |T-15 completion residual| / white
+    detail: wp.array3d(dtype=wp.float32),  # In: (N - V, S, C) S-2 bound of the completion residual / white
     criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
     exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known
     bound: float,  # In: the error bound (the decision's threshold)
@@ -170,8 +166,7 @@ def view_errors(
         dy = (ca[1] / ca[3] - cb[1] / cb[3]) * half_h
         g = wp.min(wp.sqrt(dx * dx + dy * dy) / diag, 1.0)
     # the SH width comes from the boxes themselves: 1 (y_0 of a diffuse-only store) or order^2
-    ncoef = wp.min(wp.min(box_centre.shape[3], detail.shape[3]), basis.shape[1])
-    sh_basis_fast(vh, bands_of(ncoef), basis, k)
+    ncoef = wp.min(box_centre.shape[3], basis.shape[1])
     row = node - first_internal
     # S-1 (criterion 0): geometry in pixels at the exchange rate geo_rate, luminance weighted by pixel coverage
     geo_term = g * diag * geo_rate
@@ -186,11 +181,12 @@ def view_errors(
             err[k] = wp.min(err[k], bound)
         return
     if criterion == 0:
-        det = detail_bound(k, row, used, weights, detail, basis, ncoef)
+        det = detail_bound(row, used, weights, detail)
         e_detail[k] = det
         err[k] = wp.max(geo_term, det * cover)  # S-1 with S-2
         if exact == 0:
             return
+    sh_basis_fast(vh, bands_of(ncoef), basis, k)  # T-14's spread reads the basis toward the eye
     lum = spread_bound(k, row, used, weights, box_centre, box_half, basis, ncoef)
     e_lumi[k] = lum
     if criterion == 1:

@@ -75,7 +75,7 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
         w = rt.sample_weights[j][None, :]  # C = 1 (grey) broadcasts over R, G, B
         hi += (mid + rad) * w
         lo += (mid - rad) * w
-        det += (detail[internal, j].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1) * np.abs(w)
+        det += detail[internal, j].astype(np.float64) * np.abs(w)  # S-2: (K, C) bounds toward any direction
     e_lumi = np.clip((display(hi) - display(lo)).max(1), 0.0, 1.0)
     depth = np.c_[p, np.ones(len(p))] @ rt.vp[3]  # clip w of the node centre
     foot = np.where(depth > r, np.minimum(r * rt.focal_px() / np.where(depth > r, depth, 1.0), 1e9), 1e9)

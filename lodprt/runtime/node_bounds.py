@@ -10,34 +10,48 @@ from lodprt.model.completion import CHUNK
 from lodprt.model.hierarchy import node_heights
 
 
+def radiance_bound(r: np.ndarray, C: int, n: int) -> np.ndarray:
+    """S-2: for rows of ``C`` x ``n`` SH coefficient differences (K, C * n), with n = order^2 (or 1), a bound of the
+    radiance difference toward any view direction, per channel (K, C): sum_l sqrt((2l + 1) / 4 pi) |r_l|, by
+    Cauchy-Schwarz per band and the addition theorem (sum_m y_lm(s)^2 = (2l + 1) / 4 pi for every s)."""
+    r = r.reshape(len(r), C, n)
+    out = np.zeros((len(r), C), np.float32)
+    l = 0
+    while l * l < n:
+        lo, hi = l * l, min((l + 1) ** 2, n)
+        out += np.float32(np.sqrt((2 * l + 1) / (4 * np.pi))) * np.sqrt((r[:, :, lo:hi] ** 2).sum(-1))
+        l += 1
+    return out
+
+
 def detail_bounds(h, coeffs: np.ndarray, white: float, plan, faces: np.ndarray, levels: list) -> np.ndarray:
-    """S-2 per light sample: for each internal node, the largest of (a) |C(v) - sum_j w_j C(q_j)| over the
-    collapses in its subtree (T-15 weights over the ring the collapse removed v from) and (b) |C(v) - C(q)|
-    over its leaves v and their original neighbours q, per coefficient, in units of ``white``:
-    (N - V, S, C, ncoef) float16. (a) is zero where the completed field is linear (T-15 has linear precision);
-    (b) is one edge's step, small on smooth fields and large at a shadow or highlight boundary that runs next
-    to the subtree (between two subtrees, where neither's own collapses see it)."""
+    """S-2 per light sample and channel: for each internal node, the largest radiance difference toward any view
+    direction (``radiance_bound``) of (a) C(v) - sum_j w_j C(q_j) over the collapses in its subtree (T-15
+    weights over the ring the collapse removed v from) and (b) C(v) - C(q) over its leaves v and their original
+    neighbours q, in units of ``white``: (N - V, S, C) float32. (a) is zero where the completed field is linear
+    (T-15 has linear precision); (b) is one edge's step, small on smooth fields and large at a shadow or
+    highlight boundary that runs next to the subtree (between two subtrees, where neither's own collapses see
+    it). One number per sample and channel keeps the per-frame read to S x C values a node."""
     V, N = h.num_vertices, h.num_nodes
     _, S, C, n = coeffs.shape
-    detail = np.zeros((N - V, S, C, n), np.float16)
+    detail = np.zeros((N - V, S, C), np.float32)
     if N == V:
         return detail
     c0, c1 = h.children[:, 0], h.children[:, 1]
-    big = float(np.finfo(np.float16).max)
     ring_v, ring_q, starts = leaf_rings(faces)
     for j in range(S):
         c = coeffs[:, j].reshape(V, C * n) / np.float32(white)
-        d = np.zeros((N, C * n), np.float32)
+        d = np.zeros((N, C), np.float32)
         if len(ring_v):  # leaves: the largest step to an original neighbour (a shadow edge between subtrees)
-            d[ring_v[starts]] = np.maximum.reduceat(np.abs(c[ring_v] - c[ring_q]), starts, axis=0)
+            d[ring_v[starts]] = np.maximum.reduceat(radiance_bound(c[ring_v] - c[ring_q], C, n), starts, axis=0)
         for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
             rows = slice(start, min(start + CHUNK, N - V))
             r = max(int(plan.ring_len[rows].max()), 1)
             interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
-            d[V + rows.start:V + rows.stop] = np.abs(c[plan.vertex[rows]] - interp)  # T-15 residual
+            d[V + rows.start:V + rows.stop] = radiance_bound(c[plan.vertex[rows]] - interp, C, n)  # T-15 residual
         for nodes in levels:
             d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
-        detail[:, j] = np.clip(d[V:], 0, big).reshape(N - V, C, n)
+        detail[:, j] = d[V:]
     return detail
 
 

@@ -33,8 +33,18 @@ from lodprt.runtime.view_cut import Cut
 
 log = logging.getLogger(__name__)
 
-#: rounds of forced refinement per pass after the first frame (each round splits what its dependencies allow)
-FORCE_ROUNDS = 24
+#: splits per pass after the first frame: the most wanted nodes (largest error) are forced first, the rest wait for
+#: the next frame, so that no frame stalls on a burst of refinement (the first frame converges in full)
+FRAME_SPLITS = 4096
+#: a candidate whose cached error is far from the bound (outside [bound / NEAR, bound * NEAR]) is evaluated again
+#: every REFRESH_FRAMES frames (a rotating slice each frame); nearer ones, new ones and every node after a jump of
+#: the camera or the lights (JUMP) are evaluated every frame (temporal coherence, docs/RUNTIME.md)
+REFRESH_FRAMES = 4
+NEAR = 2.0
+#: a camera move of more than JUMP of its distance to the target, or a change of the light weights by more than
+#: LIGHT_JUMP of their sum, counts as a jump
+JUMP = 0.1
+LIGHT_JUMP = 0.4
 #: a failed collapse of a node with more original edges under it than this backs off for a few frames
 BACKOFF_EDGES = 20_000
 #: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
@@ -156,6 +166,7 @@ class Runtime:
         self._culled = np.zeros(h.num_nodes, bool)
         self._err = np.zeros(h.num_nodes)
         self._stamp = np.full(h.num_nodes, -1, np.int64)
+        self._refresh_all = True  # the next frame evaluates every candidate (set by jumps and new bounds)
         self.camera: Camera | None = None
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
@@ -172,7 +183,7 @@ class Runtime:
 
     @property
     def detail(self) -> np.ndarray:
-        """S-2 detail bounds (N - V, S, C, ncoef) float16 (``lodprt.runtime.node_bounds.detail_bounds``)."""
+        """S-2 detail bounds (N - V, S, C) float32 (``lodprt.runtime.node_bounds.detail_bounds``)."""
         return self._node_bounds("detail")
 
     def _node_bounds(self, name: str) -> np.ndarray:
@@ -189,7 +200,8 @@ class Runtime:
                 made = {"box_centre": centre, "box_half": half}
             for key, value in made.items():
                 self._bounds[key] = value
-                self._d[key] = self._wp.array(value, dtype=self._wp.float16, device=self.device)
+                self._d[key] = self._wp.array(value, dtype=self._wp.float32 if key == "detail" else self._wp.float16,
+                                              device=self.device)
         return self._bounds[name]
 
     def _kernel_bounds(self, exact: bool) -> list:
@@ -201,11 +213,13 @@ class Runtime:
             need |= {"box_centre", "box_half"}
         if "placeholder" not in self._d:
             self._d["placeholder"] = self._wp.zeros((1, 1, 1, self.ncoef), dtype=self._wp.float16, device=self.device)
+            self._d["placeholder_detail"] = self._wp.zeros((1, 1, 1), dtype=self._wp.float32, device=self.device)
         out = []
         for name in ("box_centre", "box_half", "detail"):
             if name in need:
                 self._node_bounds(name)
-            out.append(self._d[name] if name in need else self._d["placeholder"])
+            spare = "placeholder_detail" if name == "detail" else "placeholder"
+            out.append(self._d[name] if name in need else self._d[spare])
         return out
 
     def _upload(self) -> None:
@@ -259,6 +273,7 @@ class Runtime:
             raise LodprtError(f"error_bound {error_bound}: must be a finite number >= 0")
         self.error_bound = e
         self._dirty = True
+        self._refresh_all = True
         if alpha is not None:
             a = float(alpha)
             if not 0.0 <= a <= 1.0:
@@ -274,6 +289,7 @@ class Runtime:
         self._fails[:] = 0
         self._retry_at[:] = 0
         self._dirty = True
+        self._refresh_all = True
 
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
@@ -282,6 +298,9 @@ class Runtime:
         pos, moved = self.interp.clamp(pos)  # warns (or refuses) once per call
         W = self.interp.rgb_weights(pos, col)  # lights add (thesis 3.4.1)
         self._dirty = True
+        old = getattr(self, "sample_weights", None)
+        if old is None or old.shape != W.shape or np.abs(W - old).sum() > LIGHT_JUMP * max(np.abs(old).sum(), 1e-30):
+            self._refresh_all = True
         self.light_positions = pos
         self.light_colors = col
         self.lights_clamped = int(moved.sum())
@@ -291,15 +310,27 @@ class Runtime:
     def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
                    near=None, far=None) -> Camera:
         """A ``Camera`` or its fields (``set_camera(eye, target, up, fov, width, height)``)."""
+        old = self.camera
         if isinstance(camera, Camera):
             self.camera = camera
         else:
             self.camera = as_camera(camera, target=target, up=up, fov=fov, width=width, height=height,
                                      near=near, far=far)
         self._dirty = True
+        if old is None or self._camera_jump(old, self.camera):
+            self._refresh_all = True
         self.vp = view_projection(self.camera, self.bounds)
         self.planes = clip_planes(self.vp)
         return self.camera
+
+    @staticmethod
+    def _camera_jump(a: Camera, b: Camera) -> bool:
+        """More than a small step from camera ``a`` to ``b``: the eye or the target moved by more than JUMP of the
+        viewing distance, or the lens, screen or up vector changed."""
+        dist = max(float(np.linalg.norm(np.subtract(a.eye, a.target))), 1e-12)
+        step = max(float(np.linalg.norm(np.subtract(a.eye, b.eye))), float(np.linalg.norm(np.subtract(a.target, b.target))))
+        return step > JUMP * dist or (a.fov, a.width, a.height, a.up, a.near, a.far) != (b.fov, b.width, b.height, b.up,
+                                                                                           b.near, b.far)
 
     # -- errors ------------------------------------------------------------------------------------------------
     def node_errors(self, nodes, *, exact: bool = True) -> NodeErrors:
@@ -352,13 +383,21 @@ class Runtime:
         act = np.flatnonzero(cut.active)
         rc = act[act >= V]  # Refine-Candidates
         par = h.parent[act]
-        par = np.unique(par[par >= 0])
-        cc = par[cut.active[h.children[par, 0]] & cut.active[h.children[par, 1]]]  # Coarsen-Candidates
+        first = (par >= 0) & (h.children[np.maximum(par, 0), 0] == act)  # each parent once, through its child 0
+        par = par[first]
+        cc = par[cut.active[h.children[par, 1]]]  # Coarsen-Candidates: both children active
         nodes = np.concatenate([rc, cc])
         if not len(nodes):
             return 0, 0, 0
-        # errors depend on the frame's camera and lights only: each node is evaluated once per frame
+        # errors depend on the frame's camera and lights only: each node is evaluated at most once per frame, and
+        # after the first frame (no jump since) one far from the bound only every REFRESH_FRAMES frames
         fresh = self._stamp[nodes] != self._frame
+        if self._converged_once and not self._refresh_all:
+            e, b = self._err[nodes], self.error_bound
+            due = (self._stamp[nodes] < 0) | (self._frame - self._stamp[nodes] >= REFRESH_FRAMES)
+            due |= (nodes + self._frame) % REFRESH_FRAMES == 0
+            due |= ~self._culled[nodes] & (e * NEAR > b) & (e < b * NEAR)
+            fresh &= due
         if fresh.any():
             new = nodes[fresh]
             c, e = self.node_errors(new, exact=False)[:2]
@@ -369,7 +408,8 @@ class Runtime:
         want_coarsen = culled[k:] | (err[k:] <= self.error_bound)
         refined = coarsened = touched = 0
         # a collapse found blocked waits until the finer neighbour found blocking it is gone (one per node);
-        # allowed collapses and splits are made all at once (Cut.coarsen_many / refine_many)
+        # collapses, then forced splits, are made in turn by the sequential kernels (Cut.coarsen_list /
+        # force_refine_list), each checked against the cut as it is then
         todo = cc[want_coarsen]
         blk = self._blocker[todo]
         todo = todo[(blk < 0) | ~cut.active[np.maximum(blk, 0)]]
@@ -377,7 +417,7 @@ class Runtime:
             todo = todo[self._retry_at[todo] <= self._frame]
         touched += len(todo)
         if len(todo):
-            done, blocker = cut.coarsen_many(todo)
+            done, blocker = cut.coarsen_list(todo, device=self.device)
             self._blocker[todo] = np.where(done, -1, blocker)
             big = self._subtree_edges[todo] > BACKOFF_EDGES
             self._fails[todo] = np.where(done | ~big, 0, np.minimum(self._fails[todo] + 1, 5))
@@ -386,11 +426,12 @@ class Runtime:
         split = rc[want_refine]
         split = split[np.argsort(-err[:k][want_refine], kind="stable")]
         split = split[cut.active[split]]
-        touched += len(split)  # (refine_many skips nodes no longer active)
-        if len(split):  # allowed splits at once; blocked ones forced, their blockers split first (all at once)
-            # a long chain of forced splits is spread over frames (FORCE_ROUNDS rounds a pass) once the cut has
-            # converged, so that no frame stalls; the first frame converges in full
-            n = cut.force_refine_many(split, max_rounds=FORCE_ROUNDS if self._converged_once else None)
+        touched += len(split)
+        if len(split):  # largest error first; blocked ones forced, their coarser blockers split first
+            # once the cut has converged a pass makes at most FRAME_SPLITS splits (the rest wait a frame), so that
+            # no frame stalls; the first frame converges in full
+            n = cut.force_refine_list(split, max_splits=FRAME_SPLITS if self._converged_once else None,
+                                      device=self.device)
             refined += n
             touched += max(n - len(split), 0)
         return refined, coarsened, touched
@@ -413,6 +454,7 @@ class Runtime:
                     self._settled = True
                     break
             self._converged_once = True
+            self._refresh_all = False
         self._dirty = False
         t1 = time.perf_counter()
         h = self.h
@@ -482,7 +524,7 @@ class Runtime:
                 fs = np.flatnonzero(mark)
                 self._fmap[fs], self._flive[fs] = map_faces(self.h, self.faces[fs], anc)
         self._tri_anc = anc.copy()
-        return self._fmap[self._flive]
+        return self._fmap[np.flatnonzero(self._flive)]  # an index gather: cheaper than a 2-D boolean mask
 
     # -- full resolution ---------------------------------------------------------------------------------------
     def coefficients(self, vertex_ids=None) -> np.ndarray:

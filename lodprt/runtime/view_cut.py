@@ -37,7 +37,8 @@ class Cut:
         e = e[np.argsort(rank[e[:, 0]], kind="stable")]
         self._nbr = e[:, 1].astype(np.int32)
         self._ptr = np.searchsorted(rank[e[:, 0]], np.arange(V + 1))
-        self.anc = active_ancestors(hierarchy, self.active)
+        self.anc = np.ascontiguousarray(active_ancestors(hierarchy, self.active), np.int32)
+        self._dev: dict = {}  # per Warp device: the arrays of the sequential kernels (``_device_arrays``)
 
     @classmethod
     def full(cls, hierarchy: Hierarchy, faces) -> "Cut":
@@ -297,6 +298,92 @@ class Cut:
             splits += 1
             stack.pop()
         return splits
+
+    # -- sequential kernels (``lodprt.kernels.view_cut``): the frame loop's moves -----------------------------------
+    def _device_arrays(self, device: str) -> dict:
+        """The hierarchy, the edge table and the cut's state as Warp arrays on ``device``, made once. On the CPU
+        ``active`` and ``anc`` alias this cut's numpy arrays; elsewhere they are copied over and back per call."""
+        if device not in self._dev:
+            from lodprt.devices import warp
+
+            wp = warp()
+            h = self.h
+            i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device)  # noqa: E731
+            i2 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, ndim=2, device=device)  # noqa: E731
+            d = {"children": i2(h.children), "parent": i32(h.parent), "creation": i32(h.creation),
+                 "leaf_order": i32(h.leaf_order), "leaf_range": i2(h.leaf_range), "edge_ptr": i32(self._ptr),
+                 "edge_nbr": i32(self._nbr), "stack": wp.empty(max(h.num_nodes, 1), dtype=wp.int32, device=device),
+                 "result": wp.zeros(3, dtype=wp.int32, device=device)}
+            if device == "cpu":
+                d["active"] = wp.array(self.active.view(np.uint8), dtype=wp.uint8, device=device, copy=False)
+                d["anc"] = wp.array(self.anc, dtype=wp.int32, device=device, copy=False)
+            self._dev[device] = d
+        d = self._dev[device]
+        if device != "cpu":
+            from lodprt.devices import warp
+
+            wp = warp()
+            d["active"] = wp.array(self.active.view(np.uint8), dtype=wp.uint8, device=device)
+            d["anc"] = wp.array(self.anc, dtype=wp.int32, device=device)
+        return d
+
+    def _device_back(self, d: dict, device: str) -> None:
+        if device != "cpu":
+            self.active.view(np.uint8)[:] = d["active"].numpy()
+            self.anc[:] = d["anc"].numpy()
+
+    def coarsen_list(self, nodes, *, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
+        """Collapse the children of each node of ``nodes`` in turn where the collapse rule holds at that moment
+        (``lodprt.kernels.view_cut.coarsen_list``, one thread); returns (done (K,) bool, blocker (K,) int64: an
+        active neighbour forbidding the collapse, -1 where none). Like ``coarsen_many`` but sequential: a collapse
+        may enable or forbid the next, and every step is checked against the cut as it is then."""
+        from lodprt.devices import warp
+        from lodprt.kernels import view_cut as kv
+
+        wp = warp()
+        nodes = self._node_list(nodes)
+        K = len(nodes)
+        if not K:
+            return np.zeros(0, bool), np.zeros(0, np.int64)
+        d = self._device_arrays(device)
+        done = wp.zeros(K, dtype=wp.uint8, device=device)
+        blocker = wp.zeros(K, dtype=wp.int32, device=device)
+        wp.launch(kv.coarsen_list, dim=1, inputs=[
+            wp.array(nodes, dtype=wp.int32, device=device), d["children"], d["parent"], d["creation"],
+            d["leaf_order"], d["leaf_range"], d["edge_ptr"], d["edge_nbr"], d["active"], d["anc"]],
+            outputs=[done, blocker], device=device)
+        self._device_back(d, device)
+        return done.numpy().astype(bool), blocker.numpy().astype(np.int64)
+
+    def force_refine_list(self, nodes, *, max_splits: int | None = None, device: str = "cpu") -> int:
+        """Forced refinement of each node of ``nodes`` in turn (seed 003 table 5.1; ``lodprt.kernels.view_cut.
+        force_refine_list``, one thread): a node still active and internal is split, its coarser blocking
+        neighbours first, recursively. ``max_splits`` stops taking new nodes once that many splits are made (the
+        rest can be forced later: the cut is legal after every split). Returns the number of splits."""
+        from lodprt.devices import warp
+        from lodprt.kernels import view_cut as kv
+
+        wp = warp()
+        nodes = self._node_list(nodes)
+        if not len(nodes):
+            return 0
+        d = self._device_arrays(device)
+        wp.launch(kv.force_refine_list, dim=1, inputs=[
+            wp.array(nodes, dtype=wp.int32, device=device), -1 if max_splits is None else int(max_splits),
+            d["children"], d["creation"], d["leaf_order"], d["leaf_range"], d["edge_ptr"], d["edge_nbr"],
+            d["active"], d["anc"], d["stack"]], outputs=[d["result"]], device=device)
+        self._device_back(d, device)
+        splits, _, overflow = d["result"].numpy().tolist()
+        if overflow:  # cannot happen: the stack holds as many nodes as the hierarchy
+            raise LodprtError("forced refinement: the dependency chain outgrew its stack")
+        return int(splits)
+
+    def _node_list(self, nodes) -> np.ndarray:
+        nodes = np.asarray(nodes, np.int64).ravel()
+        if len(nodes) and (nodes.min() < 0 or nodes.max() >= self.h.num_nodes):
+            bad = nodes[(nodes < 0) | (nodes >= self.h.num_nodes)][0]
+            raise LodprtError(f"node {int(bad)} does not exist (the hierarchy has {self.h.num_nodes} nodes)")
+        return nodes.astype(np.int32)
 
     def triangles(self, *, return_index: bool = False):
         """Faces of the cut's mesh in original vertex ids (vertex of each active ancestor), degenerate ones
