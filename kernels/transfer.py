@@ -186,3 +186,127 @@ def closest_hits(
         bary[i] = wp.vec3(hit.u, hit.v, 1.0 - hit.u - hit.v)
     else:
         face[i] = -1
+
+
+# -- mirror (caustic) paths: specular chains followed in the interreflection passes (C-1, C-2) ------------------
+
+
+@wp.func
+def mirror_step(
+    normals: wp.array(dtype=wp.vec3),
+    faces: wp.array2d(dtype=wp.int32),
+    f: int,
+    u: float,
+    v: float,
+    face_normal: wp.vec3,
+    d: wp.vec3,
+):
+    # C-1: d reflected about the hit's interpolated (smooth) normal m, d - 2 (d.m) m; zero when d meets the back
+    # of the triangle or the reflection would leave through it (a grazing hit on a coarse mesh): absorbed there
+    m = wp.normalize(u * normals[faces[f, 0]] + v * normals[faces[f, 1]] + (1.0 - u - v) * normals[faces[f, 2]])
+    r = d - 2.0 * wp.dot(d, m) * m
+    if wp.dot(r, face_normal) <= 0.0 or wp.dot(d, face_normal) >= 0.0:
+        return wp.vec3(0.0, 0.0, 0.0)
+    return r
+
+
+@wp.kernel
+def mirror_direct(
+    mesh: wp.uint64,  # In: BVH of the scene
+    points: wp.array(dtype=wp.vec3),  # In: (V,) vertex positions
+    normals: wp.array(dtype=wp.vec3),  # In: (V,) unit vertex normals
+    faces: wp.array2d(dtype=wp.int32),  # In: (F, 3) the BVH's triangles
+    reflectance: wp.array(dtype=wp.float32),  # In: (F,) mirror reflectance per face, 0 for non-mirrors
+    dirs: wp.array(dtype=wp.vec3),  # In: (R,) unit directions of weight 4 pi / R
+    rotate: int,  # In: 1 to turn the set per vertex
+    seed: int,  # In: seed of the per-vertex rotations
+    order: int,  # In: SH bands
+    offset: float,  # In: ray origin offset along the normal
+    max_dist: float,  # In: ray length
+    max_mirror: int,  # In: most mirror reflections per path (longer chains are dropped)
+    first: int,  # In: vertex of thread 0 (launches of vertex ranges)
+    scratch: wp.array2d(dtype=wp.float32),  # Temp: (V, order^2) basis row per thread
+    out: wp.array2d(dtype=wp.float32),  # Out: (V, order^2) += C-1: sum_r w max(n.s_r, 0) rho(chain) y_i(s_out)
+):
+    v = first + wp.tid()
+    n = normals[v]
+    q = vertex_rotation(seed, v, rotate)
+    p0 = points[v] + offset * n
+    w = FOUR_PI / float(dirs.shape[0])
+    for r in range(dirs.shape[0]):
+        d0 = wp.quat_rotate(q, dirs[r])
+        c = wp.dot(n, d0)
+        if c <= 0.0:
+            continue
+        o = p0
+        d = d0
+        rho = float(1.0)
+        for k in range(max_mirror + 1):
+            hit = wp.mesh_query_ray(mesh, o, d, max_dist)
+            if not hit.result:  # escaped: the environment seen along the (reflected) direction
+                sh_basis(d, order, scratch, v)
+                for i in range(order * order):
+                    out[v, i] = out[v, i] + w * c * rho * scratch[v, i]
+                break
+            refl = reflectance[hit.face]
+            if refl <= 0.0 or k == max_mirror:
+                break  # a diffuse occluder, or one reflection too many
+            dn = mirror_step(normals, faces, hit.face, hit.u, hit.v, hit.normal, d)
+            if wp.length_sq(dn) == 0.0:
+                break
+            rho = rho * refl
+            o = o + hit.t * d + offset * wp.normalize(hit.normal)
+            d = dn
+
+
+@wp.kernel
+def mirror_bounce(
+    mesh: wp.uint64,  # In: BVH of the scene
+    points: wp.array(dtype=wp.vec3),  # In: (V,) vertex positions
+    normals: wp.array(dtype=wp.vec3),  # In: (V,) unit vertex normals
+    faces: wp.array2d(dtype=wp.int32),  # In: (F, 3) the BVH's triangles
+    reflectance: wp.array(dtype=wp.float32),  # In: (F,) mirror reflectance per face, 0 for non-mirrors
+    dirs: wp.array(dtype=wp.vec3),  # In: (R,) unit directions of weight 4 pi / R
+    rotate: int,  # In: 1 to turn the set per vertex
+    seed: int,  # In: seed of the per-vertex rotations
+    offset: float,  # In: ray origin offset along the normal
+    max_dist: float,  # In: ray length
+    max_mirror: int,  # In: most mirror reflections per path (longer chains are dropped)
+    first: int,  # In: vertex of thread 0 (launches of vertex ranges)
+    previous: wp.array2d(dtype=wp.float32),  # In: (V, K) the previous pass' transfer (albedo included)
+    out: wp.array2d(dtype=wp.float32),  # Out: (V, K) += C-2: sum_r w max(n.s_r, 0) sum_hits rho T_prev(hit)
+):
+    v = first + wp.tid()
+    n = normals[v]
+    q = vertex_rotation(seed, v, rotate)
+    p0 = points[v] + offset * n
+    w = FOUR_PI / float(dirs.shape[0])
+    k_count = previous.shape[1]
+    for r in range(dirs.shape[0]):
+        d0 = wp.quat_rotate(q, dirs[r])
+        c = wp.dot(n, d0)
+        if c <= 0.0:
+            continue
+        o = p0
+        d = d0
+        rho = float(1.0)
+        for k in range(max_mirror + 1):
+            hit = wp.mesh_query_ray(mesh, o, d, max_dist)
+            if not hit.result:
+                break  # escaped: no bounce light (the environment came in pass 0)
+            if wp.dot(hit.normal, d) >= 0.0:
+                break  # the back of a surface
+            f = hit.face
+            bw = 1.0 - hit.u - hit.v
+            for j in range(k_count):  # the hit surface's own diffuse light (a mirror's kd part too)
+                t = hit.u * previous[faces[f, 0], j] + hit.v * previous[faces[f, 1], j] + bw * previous[faces[f, 2], j]
+                out[v, j] = out[v, j] + w * c * rho * t
+            refl = reflectance[f]
+            if refl <= 0.0 or k == max_mirror:
+                break
+            dn = mirror_step(normals, faces, hit.face, hit.u, hit.v, hit.normal, d)
+            if wp.length_sq(dn) == 0.0:
+                break
+            rho = rho * refl
+            o = o + hit.t * d + offset * wp.normalize(hit.normal)
+            d = dn

@@ -16,6 +16,12 @@ Public API (everything else may change)::
     lodprt.bake_transfer(scene, "env.zarr", order=3, mode="interreflected", environment=env)
     rgb = lodprt.relit_radiance(lodprt.open_transfer("env.zarr"), env.project(3), eye=(0, 0.5, 1))  # (V, 3)
 
+    lodprt.export_glb(store, "lit.glb", sample=0, eye=(0, 0.5, 1))  # mesh, COLOR_0, _SH_i (docs/EXPORT.md)
+
+    vol = lodprt.load_volume("cloud")                 # or a .npy density grid + bounds (docs/VOLUMES.md)
+    lodprt.bake_volume(vol, "cloud.zarr", order=3, rays=128, bounces=2)
+    lodprt.bake_neighbourhood(scene, "bunny", "near.zarr", grid=(16, 16, 16))   # transfer around one object
+
 Names are imported on first use, so ``import lodprt`` stays cheap (Warp loads only when a kernel is needed).
 """
 
@@ -40,6 +46,13 @@ _LAZY = {
     "bake_transfer": "lodprt.precompute.transfer",
     "open_transfer": "lodprt.runtime.environment_relight",
     "relit_radiance": "lodprt.runtime.environment_relight",
+    "export_glb": "lodprt.display.export",
+    "Volume": "lodprt.model.volume",
+    "load_volume": "lodprt.model.volume",
+    "bake_volume": "lodprt.precompute.volume",
+    "VolumeStore": "lodprt.store.volume_store",
+    "bake_neighbourhood": "lodprt.precompute.neighbourhood",
+    "NeighbourhoodStore": "lodprt.store.neighbourhood_store",
 }
 
 __all__ = ["LodprtError", "SceneError", "StoreError", *_LAZY]

@@ -83,15 +83,17 @@ def _add_compare(sub) -> None:
 def _add_turntable(sub) -> None:
     tt = sub.add_parser(
         "turntable",
-        help="an orbit of the camera with moving lights: PNG sequence (a folder) or an animated GIF",
+        help="an orbit of the camera with moving lights: PNG sequence (a folder), an animated GIF or an H.264 MP4",
         description="Orbit the camera around the target (and the lights around the vertical axis through it) "
-        "and write every frame: OUT a folder gets frame_0000.png ..., OUT ending in .gif an animated GIF.",
+        "and write every frame: OUT a folder gets frame_0000.png ..., OUT ending in .gif an animated GIF, OUT "
+        "ending in .mp4 an H.264 video (needs the optional imageio-ffmpeg: pip install 'lodprt[video]'; odd sizes "
+        "are padded to even).",
     )
-    _add_view_args(tt, "DIR|video.gif", required=False)
+    _add_view_args(tt, "DIR|video.gif|video.mp4", required=False)
     tt.add_argument("--frames", type=int, default=36, metavar="N", help="frames per orbit (default 36)")
     tt.add_argument("--light-turns", type=float, default=1.0, metavar="T",
                     help="turns the lights make about the vertical axis per orbit (default 1; 0 keeps them still)")
-    tt.add_argument("--fps", type=float, default=12.0, metavar="F", help="GIF frame rate (default 12)")
+    tt.add_argument("--fps", type=float, default=12.0, metavar="F", help="GIF or MP4 frame rate (default 12)")
     tt.set_defaults(handler=cmd_turntable)
 
 

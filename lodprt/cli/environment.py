@@ -44,8 +44,23 @@ def _add_irradiance(sub) -> None:
     )
     ir.add_argument("environment", metavar="ENV", help=ENV_HELP)
     ir.add_argument("--mip", type=int, default=0, metavar="K", help="project from mip level K (each level halves the resolution)")
+    _add_window(ir, "the 9 coefficients printed")
     cli_args.add_json(ir)
+    ir.add_argument("--format", choices=("gltf", "unity", "filament"), default=None,
+                    help="print only the 9 x 3 irradiance coefficients as JSON in an engine's convention "
+                    "(docs/EXPORT.md): gltf (KHR_lights_environment irradianceCoefficients), unity "
+                    "(SphericalHarmonicsL2 and its shader constants), filament (cmgen's pre-scaled sh.txt)")
     ir.set_defaults(handler=cmd_irradiance)
+
+
+def _add_window(p, what: str) -> None:
+    """--window and --window-width (de-ringing, lodprt.model.windowing) applied to ``what``."""
+    p.add_argument("--window", choices=("auto", "hann", "lanczos", "none"), default="none",
+                   help=f"de-ringing window on the SH bands of {what} (default none): auto narrows a Hann or Lanczos "
+                   "window until the irradiance is >= 0 everywhere on the sphere (none when it already is) and "
+                   "reports the window chosen; hann, lanczos: that window at --window-width bands")
+    p.add_argument("--window-width", type=float, default=None, metavar="W",
+                   help="width in bands of --window hann|lanczos (default: the SH order; band l >= W is dropped)")
 
 
 def _add_bake_environment(sub) -> None:
@@ -92,6 +107,12 @@ def _add_render_environment(sub) -> None:
                     help="N > 1: N images turning the environment by 360/N degrees each, OUT_0000.png ... (default 1)")
     cli_args.add_camera(re)
     re.add_argument("--white", type=float, default=None, metavar="L", help="radiance shown as white (default: 99th percentile of the first frame)")
+    _add_window(re, "the lighting (chosen once: a band window commutes with --rotate)")
+    re.add_argument("--receiver", default=None, metavar="MESH",
+                    help="with a neighbourhood store (lodprt bake-neighbourhood): also draw this mesh (or scene file), "
+                    "lit by the object's transferred lighting: its shadow and reflected light (docs/VOLUMES.md)")
+    re.add_argument("--at", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=cli_args.XYZ,
+                    help="move the --receiver by X Y Z (default 0 0 0)")
     cli_args.add_output(re, "img.png", "output PNG")
     re.set_defaults(handler=cmd_render_environment)
 
@@ -103,13 +124,28 @@ def cmd_irradiance(args) -> int:
     env = load_environment(args.environment)
     if args.mip:
         env = env.mip(args.mip)
-    doc = irr.describe(irr.lighting_coefficients(env))
+    from lodprt.model.windowing import apply_window, choose_window
+
+    coeffs = irr.lighting_coefficients(env)
+    choice = choose_window(coeffs, args.window, width=args.window_width)
+    doc = irr.describe(apply_window(coeffs, choice.factors))
+    doc["window"] = choice.to_json()
     doc["environment"] = {"source": env.source, "kind": env.kind, "shape": list(env.data.shape[:-1]),
                           "mip_level": args.mip}
+    if args.format is not None:
+        if args.json:
+            raise LodprtError("--json and --format exclude each other (--format prints JSON itself)")
+        from lodprt.model.irradiance_formats import export_document
+
+        print(json.dumps(export_document(args.format, apply_window(coeffs, choice.factors), source=env.source),
+                         indent=2))
+        return 0
     if args.json:
         print(json.dumps(doc, indent=2))
         return 0
     _print_irradiance(env, doc)
+    if args.window != "none":
+        print(f"window: {choice.describe()}")
     return 0
 
 
@@ -166,7 +202,8 @@ def bake_environment(scene_path, out, *, environment: str | None = None, sh_orde
     e = res.diffuse.energy
     print(f"wrote {res.path}: order {sh_order} {transfer} transfer, {rays} rays/vertex, "
           f"{len(e) - 1} bounce pass(es) (energy " + ", ".join(f"{x:.3g}" for x in e) + f"), "
-          f"{len(res.glossy_ids):,} glossy matrices; "
+          f"{len(res.glossy_ids):,} glossy matrices"
+          + (f" ({len(res.glossy_kept_ids):,} baked, the rest completed)" if res.cut_nodes is not None else "") + "; "
           + (f"LOD keeps {len(res.cut_nodes):,} of {scene.num_vertices:,} vertices; " if res.cut_nodes is not None else "")
           + f"bake {res.seconds:.2f} s on {res.device} "
           f"(+{res.load_seconds:.2f} s kernel load)")
@@ -176,35 +213,42 @@ def bake_environment(scene_path, out, *, environment: str | None = None, sh_orde
 def cmd_render_environment(args) -> int:
     return render_environment(args.store, args.out, eye=args.eye, environment=args.environment, rotate=args.rotate,
                               frames=args.frames, target=args.target, fov=args.fov, size=args.size,
-                              white=args.white, overwrite=args.overwrite)
+                              white=args.white, overwrite=args.overwrite, window=args.window,
+                              window_width=args.window_width, receiver=args.receiver, at=args.at)
 
 
 def render_environment(store_path, out, *, eye, environment: str | None = None, rotate: float = 0.0, frames: int = 1,
                        target=None, fov: float = cli_args.FOV, size=cli_args.SIZE, white: float | None = None,
-                       overwrite: bool = False) -> int:
+                       overwrite: bool = False, window: str = "none", window_width: float | None = None,
+                       receiver=None, at=(0.0, 0.0, 0.0)) -> int:
     """``lodprt render-environment`` with these values: relight, draw and write the PNG(s), report, exit code 0."""
     import numpy as np
 
-    from lodprt.display.environment_render import render_relit, save_png
-    from lodprt.runtime.environment_relight import open_transfer, rotated_lighting
+    from lodprt.display.environment_render import open_relit, save_png
+    from lodprt.runtime.environment_relight import rotated_lighting
 
     out = cli_args.require_suffix(out, ".png")
     cli_args.at_least("--frames", frames, 1)
-    store = open_transfer(store_path)
+    store, draw = open_relit(store_path, receiver=receiver, at=at)  # a neighbourhood store draws its receiver
     lighting = _lighting(store, store_path, environment)
+    from lodprt.model.windowing import apply_window, choose_window
+
+    choice = choose_window(lighting, window, width=window_width)  # before any turn: W-1 commutes with P-4
+    lighting = apply_window(lighting, choice.factors)
     paths = [out] if frames == 1 else [out.with_name(f"{out.stem}_{k:04d}.png") for k in range(frames)]
     for p in paths:
         cli_args.refuse_existing(p, overwrite)
     for k, p in enumerate(paths):
         deg = rotate + 360.0 * k / frames
-        img, rad = render_relit(store, rotated_lighting(lighting, deg), eye=eye, target=target, fov=fov,
+        img, rad = draw(store, rotated_lighting(lighting, deg), eye=eye, target=target, fov=fov,
                                 size=tuple(size), white=white)
         if white is None:  # keep the first frame's white for the whole sequence
             pos = rad[rad > 0]
             white = float(np.percentile(pos, 99)) if pos.size else 1.0
         save_png(p, img)
     print(f"wrote {paths[0]}" + (f" ... {paths[-1].name} ({len(paths)} frames)" if len(paths) > 1 else "")
-          + f": environment turned {rotate:g} deg" + (f" + 360/{frames} per frame" if len(paths) > 1 else ""))
+          + f": environment turned {rotate:g} deg" + (f" + 360/{frames} per frame" if len(paths) > 1 else "")
+          + (f"; {choice.describe()}" if window != "none" else ""))
     return 0
 
 

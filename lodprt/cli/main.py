@@ -1,9 +1,9 @@
 """The ``lodprt`` command line: bake, info, radiance, frames, diff, render, compare, turntable, view, irradiance,
-bake-environment, render-environment.
+bake-environment, render-environment, bake-volume, render-volume, bake-neighbourhood, export.
 
 The parser is built from the command modules' ``register`` functions (:mod:`lodprt.cli.bake`,
-:mod:`lodprt.cli.inspection`, :mod:`lodprt.cli.frames`, :mod:`lodprt.cli.display`, :mod:`lodprt.cli.environment`;
-their shared arguments are in :mod:`lodprt.cli.args`). Errors lodprt raises on purpose (bad scene, bad store,
+:mod:`lodprt.cli.inspection`, :mod:`lodprt.cli.frames`, :mod:`lodprt.cli.display`, :mod:`lodprt.cli.environment`,
+:mod:`lodprt.cli.volume`, :mod:`lodprt.cli.export`; their shared arguments are in :mod:`lodprt.cli.args`). Errors lodprt raises on purpose (bad scene, bad store,
 unavailable device) are printed as one line naming the file and field, with exit code 2; anything else is a bug and
 keeps its traceback.
 """
@@ -15,10 +15,10 @@ import logging
 import os
 import sys
 
-from lodprt.cli import bake, display, environment, frames, inspection
+from lodprt.cli import bake, display, environment, export, frames, inspection, volume
 from lodprt.errors import LodprtError
 
-COMMAND_MODULES = (bake, inspection, frames, display, environment)
+COMMAND_MODULES = (bake, inspection, frames, display, environment, volume, export)
 """The command families, in the order ``lodprt --help`` lists their commands."""
 
 

@@ -1,9 +1,12 @@
-"""Pictures to files: one frame (PNG tone-mapped or linear ``.npy``) and turntables (PNG sequences, GIF), with the
-output checks every command shares (suffix, folder, no clobbering without ``overwrite``)."""
+"""Pictures to files: one frame (PNG tone-mapped or linear ``.npy``) and turntables (PNG sequences, GIF, H.264 MP4
+through the optional imageio-ffmpeg), with the output checks every command shares (suffix, folder, no clobbering
+without ``overwrite``)."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import time
 from pathlib import Path
 
@@ -42,6 +45,60 @@ def save_image(path, image: np.ndarray) -> None:
         Image.fromarray(np.asarray(image, np.uint8)).save(path)
 
 
+VIDEO_EXTRA = "pip install 'lodprt[video]'"
+
+
+def even_frame(image: np.ndarray) -> np.ndarray:
+    """``image`` padded (edge pixels repeated) to even width and height, as H.264 in yuv420p needs."""
+    h, w = image.shape[:2]
+    return np.pad(image, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") if (h | w) % 2 else image
+
+
+class VideoWriter:
+    """H.264 MP4 (yuv420p, playable everywhere) through the optional imageio-ffmpeg: :meth:`send` (H, W, 3) uint8
+    frames of one size, then :meth:`close`. Written to a hidden partial file next to ``path`` and renamed into
+    place on close, so an interrupted turntable leaves no half video (and replaces nothing). LodprtError naming
+    the extra when imageio-ffmpeg is not installed."""
+
+    def __init__(self, path, *, fps: float):
+        self.path = Path(path)
+        try:
+            import imageio_ffmpeg
+        except ImportError as exc:
+            raise LodprtError(f"{self.path}: writing .mp4 needs the optional imageio-ffmpeg; {VIDEO_EXTRA}") from exc
+        if not (np.isfinite(fps) and fps > 0):
+            raise LodprtError(f"--fps {fps}: must be a positive number of frames per second")
+        self.ffmpeg, self.fps = imageio_ffmpeg, fps
+        self.partial = self.path.with_name(f".{self.path.stem}.partial.mp4")
+        self.gen = None
+        self.frames = 0
+
+    def send(self, image: np.ndarray) -> None:
+        image = np.ascontiguousarray(even_frame(np.asarray(image, np.uint8)))
+        if self.gen is None:
+            h, w = image.shape[:2]
+            self.gen = self.ffmpeg.write_frames(str(self.partial), (w, h), fps=float(self.fps), quality=8,
+                                                macro_block_size=1, ffmpeg_log_level="error")
+            self.gen.send(None)
+        self.gen.send(image)
+        self.frames += 1
+
+    def close(self) -> Path:
+        if self.gen is None:
+            raise LodprtError(f"{self.path}: no frames to write")
+        self.gen.close()
+        os.replace(self.partial, self.path)
+        return self.path
+
+    def abort(self) -> None:
+        if self.gen is not None:
+            try:
+                self.gen.close()
+            except Exception as exc:  # noqa: BLE001 - ffmpeg may already have stopped; nothing to keep
+                log.debug("ffmpeg on %s: %s", self.partial, exc)
+        self.partial.unlink(missing_ok=True)
+
+
 def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
                    criterion: str = "screen",
                    lod: bool = True, overwrite: bool = False, **draw) -> dict:
@@ -69,17 +126,20 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
               overwrite: bool = False, **draw) -> Path:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
     turning ``light_turns`` times the other way about the same axis (clamped to the sampled light region by the
-    run time). ``out`` a folder (created; frame_0000.png, ...) or a .gif (imageio). One run time for the whole
-    orbit, so the view cut moves incrementally from frame to frame and the white point stays fixed."""
+    run time). ``out`` a folder (created; frame_0000.png, ...), a .gif (imageio) or an .mp4 (H.264 through the
+    optional imageio-ffmpeg, ``VideoWriter``; odd sizes padded to even). One run time for the whole orbit, so the
+    view cut moves incrementally from frame to frame and the white point stays fixed."""
     out = Path(out)
     if frames < 1:
         raise LodprtError(f"--frames {frames}: must be >= 1")
-    gif = out.suffix.lower() == ".gif"
+    gif, video = out.suffix.lower() == ".gif", None
     if gif:
         check_output(out, (".gif",), overwrite=overwrite)
         import imageio.v3 as iio
+    elif out.suffix.lower() == ".mp4":
+        video = VideoWriter(check_output(out, (".mp4",), overwrite=overwrite), fps=fps)
     elif out.suffix:
-        raise LodprtError(f"{out}: give a folder (PNG sequence) or a .gif path")
+        raise LodprtError(f"{out}: give a folder (PNG sequence), a .gif or an .mp4 path")
     elif out.exists() and (not out.is_dir() or (any(out.iterdir()) and not overwrite)):
         raise LodprtError(f"{out}: already exists and is not an empty folder; pass --overwrite to write into it")
     elif not out.parent.is_dir():
@@ -87,7 +147,7 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
     images = []
-    with Renderer() as renderer:
+    with Renderer() as renderer, _aborting(video):
         for k in range(frames):
             a = 2 * np.pi * k / frames
             source.set_lights([rotate_about(p, camera.target, camera.up, -light_turns * a) for p in lights], colors)
@@ -99,9 +159,24 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
             img = renderer.image(frame, **kw)
             if gif:
                 images.append(img)
+            elif video is not None:
+                video.send(img)
             else:
                 out.mkdir(exist_ok=True)
                 save_image(out / f"frame_{k:04d}.png", img)
+        if video is not None:
+            video.close()
     if gif:
         iio.imwrite(out, np.stack(images), duration=1000.0 / fps, loop=0)
     return out
+
+
+@contextlib.contextmanager
+def _aborting(video):
+    """Remove ``video``'s partial file when the block raises (a no-op for ``None``)."""
+    try:
+        yield
+    except BaseException:
+        if video is not None:
+            video.abort()
+        raise

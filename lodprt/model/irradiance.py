@@ -148,8 +148,9 @@ def irradiance_range(coeffs, *, samples: int = 20000) -> tuple[np.ndarray, np.nd
     """Per channel (min, max) of E(n) over ``samples`` spherical-Fibonacci normals.
 
     A negative minimum is ringing of the truncated expansion: a single directional light gives -3.7% of the
-    maximum (the 3-band clamped cosine dips below zero at cos = -8/15). It is reported, never clamped; windowing
-    the bands (``lodprt.sh.window``) does not help at 3 bands (Hann -6.7%, Lanczos -4.3% of the maximum).
+    maximum (the 3-band clamped cosine dips below zero at cos = -8/15). It is reported, never clamped; the
+    classic windows of width 3 bands make it worse (Hann -6.7%, Lanczos -4.3%), a narrower one removes it
+    (``lodprt.model.windowing.choose_window``, ``lodprt irradiance --window auto``).
     """
     k = np.arange(samples) + 0.5
     z = 1 - 2 * k / samples

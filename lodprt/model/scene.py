@@ -34,8 +34,8 @@ THESIS_SHININESS = 2.0
 
 FALLOFFS = ("inverse-square", "none")
 
-_OBJECT_KEYS = {"mesh", "name", "kd", "ks", "shininess", "scale", "translate", "up", "rotate"}
-_FLOOR_KEYS = {"resolution", "margin", "kd", "ks", "shininess"}
+_OBJECT_KEYS = {"mesh", "name", "kd", "ks", "shininess", "scale", "translate", "up", "rotate", "mirror"}
+_FLOOR_KEYS = {"resolution", "margin", "kd", "ks", "shininess", "mirror"}
 _LIGHT_KEYS = {"grid", "box", "intensity", "falloff", "radius"}
 _TOP_KEYS = {"object", "floor", "lights"}
 
@@ -61,11 +61,17 @@ INTENSITY_LIMIT = 1e12
 
 @dataclasses.dataclass(frozen=True)
 class Material:
-    """Phong material ``kd (L.N) + ks max(R.s, 0)^shininess`` (SPEC 2)."""
+    """Phong material ``kd (L.N) + ks max(R.s, 0)^shininess`` (SPEC 2).
+
+    ``mirror``: the surface is also a perfect mirror of reflectance ``ks`` (<= 1) whose specular bounce the
+    interreflected transfer bake follows, so caustics reach diffuse receivers (docs/ENVIRONMENT.md, "Mirror
+    paths"); the point-light bake ignores it.
+    """
 
     kd: tuple[float, float, float]
     ks: float
     shininess: float
+    mirror: bool = False
 
     @property
     def grey(self) -> bool:
@@ -282,7 +288,12 @@ def _material(where: str, table: dict, default: Material) -> Material:
     kd = _vector(f"{where}.kd", table["kd"], 3, **lim) if "kd" in table else default.kd
     ks = _number(f"{where}.ks", table["ks"], **lim) if "ks" in table else default.ks
     n = _number(f"{where}.shininess", table["shininess"], minimum=0.0) if "shininess" in table else default.shininess
-    return Material(kd=kd, ks=ks, shininess=n)
+    mirror = table.get("mirror", default.mirror)
+    if not isinstance(mirror, bool):
+        raise SceneError(f"{where}.mirror: expected true or false, got {_show(mirror)}")
+    if mirror and ks > 1.0:
+        raise SceneError(f"{where}.ks: a mirror reflects the fraction ks of the light, so ks must be <= 1, got {ks:g}")
+    return Material(kd=kd, ks=ks, shininess=n, mirror=mirror)
 
 
 def default_light_box(bounds: np.ndarray) -> tuple[float, ...]:

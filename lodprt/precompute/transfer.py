@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from lodprt.devices import resolve_device, warp
+from lodprt.devices import launch_ranges, resolve_device, warp
 from lodprt.errors import LodprtError
 from lodprt.model import sh
 from lodprt.store.transfer_store import prepare_transfer_destination, write_transfer_store
@@ -26,6 +25,8 @@ MODES = ("unshadowed", "shadowed", "interreflected")
 GLOSSY_MODES = {"none": 0, "hemisphere": 1, "shadowed": 2}
 #: ray origin offset as a fraction of the scene diagonal (the same as the point-light bake)
 RAY_OFFSET_FRACTION = 1e-4
+#: most mirror reflections followed per path (C-1, C-2); longer chains are dropped
+MAX_MIRROR = 8
 
 
 def fibonacci_directions(count: int) -> np.ndarray:
@@ -73,9 +74,11 @@ class Geometry:
     referenced: np.ndarray
     device: str
     offset: float
+    mirror: np.ndarray | None = None  # (F,) mirror reflectance per face (0: not a mirror), None: no mirrors
 
     @classmethod
-    def from_arrays(cls, positions, faces, normals, albedo=(1.0, 1.0, 1.0), *, device=None, offset=None) -> "Geometry":
+    def from_arrays(cls, positions, faces, normals, albedo=(1.0, 1.0, 1.0), *, device=None, offset=None,
+                    mirror=None) -> "Geometry":
         pos = np.asarray(positions, np.float64)
         fc = np.asarray(faces, np.int64)
         nrm = np.asarray(normals, np.float64)
@@ -87,12 +90,20 @@ class Geometry:
         ref = np.zeros(len(pos), bool)
         ref[fc.ravel()] = True
         off = ray_offset(pos) if offset is None else float(offset)
-        return cls(pos, fc.astype(np.int32), nrm, alb, ref, resolve_device(device), off)
+        refl = None
+        if mirror is not None:
+            refl = np.broadcast_to(np.asarray(mirror, np.float64), (len(fc),)).copy()
+            if not (np.isfinite(refl).all() and (refl >= 0).all() and (refl <= 1).all()):
+                raise LodprtError("transfer: mirror reflectance per face must lie in [0, 1]")
+            refl = refl if (refl > 0).any() else None
+        return cls(pos, fc.astype(np.int32), nrm, alb, ref, resolve_device(device), off, refl)
 
     @classmethod
     def from_scene(cls, scene, *, device=None) -> "Geometry":
         kd = np.array([m.kd for m in scene.materials], np.float64)[scene.material_id]
-        g = cls.from_arrays(scene.positions, scene.faces, scene.normals, kd, device=device)
+        refl = np.array([m.ks if getattr(m, "mirror", False) else 0.0 for m in scene.materials])
+        mirror = refl[scene.material_id[scene.faces[:, 0]]] if len(scene.faces) else None
+        g = cls.from_arrays(scene.positions, scene.faces, scene.normals, kd, device=device, mirror=mirror)
         g.referenced = scene.referenced.copy()
         return g
 
@@ -111,29 +122,6 @@ class Geometry:
     @property
     def max_dist(self) -> float:
         return 4.0 * float(np.linalg.norm(self.positions.max(0) - self.positions.min(0))) + 1.0
-
-
-def _launch_ranges(kernel, n: int, device: str, inputs_for, jobs: int | None) -> None:
-    """Launch ``kernel`` over items 0..n-1 in ``jobs`` contiguous ranges, one Python thread each on the CPU (a CPU
-    launch runs on one thread but releases the GIL); ``inputs_for(first)`` gives the inputs of the range starting
-    at ``first``; ranges write disjoint rows. One launch on CUDA devices."""
-    wp = warp()
-    jobs = (os.cpu_count() or 1) if jobs is None else max(1, int(jobs))
-    if not device.startswith("cpu") or jobs == 1 or n < 2 * jobs:
-        if n:
-            wp.launch(kernel, dim=n, device=device, inputs=inputs_for(0))
-        return
-    from concurrent.futures import ThreadPoolExecutor
-
-    edges = np.linspace(0, n, jobs + 1).astype(int)
-
-    def run(k):
-        a, b = int(edges[k]), int(edges[k + 1])
-        if b > a:
-            wp.launch(kernel, dim=b - a, device=device, inputs=inputs_for(a))
-
-    with ThreadPoolExecutor(jobs) as pool:
-        list(pool.map(run, range(jobs)))
 
 
 def _dirs(rays: int, device: str):
@@ -156,9 +144,31 @@ def geometric_transfer(geom: Geometry, *, order: int, rays: int = 256, shadowed:
     out = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
     scratch = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
     dirs = _dirs(rays, geom.device)
-    _launch_ranges(ktr.diffuse_direct, n, geom.device, lambda first: [
+    launch_ranges(ktr.diffuse_direct, n, geom.device, lambda first: [
         mesh.id, pts, nrm, dirs, int(rotate), int(seed), int(order), float(geom.offset), int(shadowed), geom.max_dist,
         int(first), scratch, out], jobs)
+    return out.numpy()
+
+
+def mirror_transfer(geom: Geometry, *, order: int, rays: int = 256, rotate: bool = False, seed: int = 0,
+                    max_mirror: int = MAX_MIRROR, jobs: int | None = None) -> np.ndarray:
+    """C-1, the direct pass with mirror paths (L S* D): integral max(n.s, 0) rho(s) y_i(s_out) ds per vertex, where
+    a ray meeting mirrors is reflected (at most ``max_mirror`` times, rho the product of their reflectances) until
+    it escapes along s_out or is blocked (0): (V, order^2) float32, no albedo. Without mirrors it is the shadowed
+    transfer of :func:`geometric_transfer`."""
+    from lodprt.kernels import transfer as ktr
+
+    wp = warp()
+    mesh, pts, nrm, faces2d = geom._warp()
+    n = len(geom.positions)
+    refl = np.zeros(len(geom.faces)) if geom.mirror is None else geom.mirror
+    refl = wp.array(refl.astype(np.float32), dtype=wp.float32, device=geom.device)
+    out = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
+    scratch = wp.zeros((n, order * order), dtype=wp.float32, device=geom.device)
+    dirs = _dirs(rays, geom.device)
+    launch_ranges(ktr.mirror_direct, n, geom.device, lambda first: [
+        mesh.id, pts, nrm, faces2d, refl, dirs, int(rotate), int(seed), int(order), float(geom.offset), geom.max_dist,
+        int(max_mirror), int(first), scratch, out], jobs)
     return out.numpy()
 
 
@@ -204,26 +214,30 @@ class DiffuseTransfer:
 
 def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", rays: int = 256, bounces: int = 4,
                      threshold: float = 1e-3, rotate: bool = False, seed: int = 0, keep_passes: bool = False,
-                     progress=None, jobs: int | None = None) -> DiffuseTransfer:
+                     progress=None, jobs: int | None = None, max_mirror: int = MAX_MIRROR) -> DiffuseTransfer:
     """Per-vertex diffuse transfer vectors (P-10 and the interreflection passes; docs/ENVIRONMENT.md).
 
     ``mode``: unshadowed (closed form), shadowed or interreflected (``bounces`` passes at most after the direct
-    one, stopping once a pass' energy is below ``threshold`` times the direct energy). ``progress(done, total)``
+    one, stopping once a pass' energy is below ``threshold`` times the direct energy; with mirror faces,
+    ``geom.mirror``, every pass follows up to ``max_mirror`` specular reflections, C-1 and C-2). ``progress(done, total)``
     is called after each pass; ``jobs`` CPU threads launch vertex ranges (default: all cores).
     """
     if mode not in MODES:
         raise LodprtError(f"transfer mode {mode!r}: choose one of {', '.join(MODES)}")
     if isinstance(order, bool) or int(order) != order or not 1 <= order <= 8:
         raise LodprtError(f"sh order {order!r}: the transfer kernels offer orders 1..8")
-    if bounces < 0 or not np.isfinite(threshold) or threshold < 0:
-        raise LodprtError(f"bounces {bounces} and threshold {threshold} must be >= 0")
+    if bounces < 0 or not np.isfinite(threshold) or threshold < 0 or max_mirror < 0:
+        raise LodprtError(f"bounces {bounces}, threshold {threshold} and max_mirror {max_mirror} must be >= 0")
     from lodprt.kernels import transfer as ktr
 
     wp = warp()
     t0 = time.perf_counter()
     scale = (geom.albedo / np.pi)[:, :, None]  # (V, 3, 1)
+    mirrors = mode == "interreflected" and geom.mirror is not None
     if mode == "unshadowed":
         g = unshadowed_transfer_closed_form(geom, order=order)
+    elif mirrors:
+        g = mirror_transfer(geom, order=order, rays=rays, rotate=rotate, seed=seed, max_mirror=max_mirror, jobs=jobs)
     else:
         g = geometric_transfer(geom, order=order, rays=rays, shadowed=True, rotate=rotate, seed=seed, jobs=jobs)
     cur = (scale * g[:, None, :]).astype(np.float32)
@@ -241,9 +255,15 @@ def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", 
         for b in range(bounces):
             prev = wp.array(cur.reshape(n, k), dtype=wp.float32, device=geom.device)
             out = wp.zeros((n, k), dtype=wp.float32, device=geom.device)
-            _launch_ranges(ktr.diffuse_bounce, n, geom.device, lambda first: [
-                mesh.id, pts, nrm, faces2d, dirs, int(rotate), int(seed) + b + 1, float(geom.offset), geom.max_dist,
-                int(first), prev, out], jobs)
+            if mirrors:
+                refl = wp.array(geom.mirror.astype(np.float32), dtype=wp.float32, device=geom.device)
+                launch_ranges(ktr.mirror_bounce, n, geom.device, lambda first: [
+                    mesh.id, pts, nrm, faces2d, refl, dirs, int(rotate), int(seed) + b + 1, float(geom.offset),
+                    geom.max_dist, int(max_mirror), int(first), prev, out], jobs)
+            else:
+                launch_ranges(ktr.diffuse_bounce, n, geom.device, lambda first: [
+                    mesh.id, pts, nrm, faces2d, dirs, int(rotate), int(seed) + b + 1, float(geom.offset),
+                    geom.max_dist, int(first), prev, out], jobs)
             cur = (scale * out.numpy().reshape(n, 3, order * order)).astype(np.float32)
             cur[~geom.referenced] = 0
             total += cur
@@ -288,7 +308,7 @@ def glossy_transfer(geom: Geometry, ids=None, *, order: int = 3, lighting_order:
         res = wp.zeros((len(sub), no, ni), dtype=wp.float32, device=geom.device)
         scratch = wp.zeros((len(sub), big), dtype=wp.float32, device=geom.device)
         wsub = wp.array(sub, dtype=wp.int32, device=geom.device)
-        _launch_ranges(ktr.glossy_transfer, len(sub), geom.device, lambda first: [
+        launch_ranges(ktr.glossy_transfer, len(sub), geom.device, lambda first: [
             mesh.id, pts, nrm, wsub, dirs, int(rotate), int(seed), int(order), int(lighting_order), float(geom.offset),
             GLOSSY_MODES[mode], geom.max_dist, int(first), scratch, res], jobs)
         out[s : s + len(sub)] = res.numpy()
@@ -354,8 +374,9 @@ def transfer_cut(h, transfer, threshold: float, *, floor_fraction: float = 0.05)
 
 @dataclasses.dataclass
 class TransferBake:
-    """What :func:`bake_transfer` made: ``diffuse`` (every vertex), glossy ``(ids, matrices)``, and with LOD the
-    hierarchy ``tree`` and the ``cut_nodes`` whose vertices the store keeps."""
+    """What :func:`bake_transfer` made: ``diffuse`` (every vertex), the glossy vertices ``glossy_ids`` and the
+    matrices ``glossy`` of ``glossy_kept_ids`` (all of them without LOD), and with LOD the hierarchy ``tree`` and the
+    ``cut_nodes`` whose vertices the store keeps."""
 
     path: Path | None
     diffuse: DiffuseTransfer
@@ -366,6 +387,7 @@ class TransferBake:
     device: str
     cut_nodes: np.ndarray | None = None
     tree: object = None
+    glossy_kept_ids: np.ndarray | None = None
 
 
 def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", rays: int = 256, bounces: int = 4,
@@ -379,7 +401,8 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     None. ``environment`` (an :class:`lodprt.environment.Environment`) is optional: its coefficients are stored
     as the default lighting for rendering. The transfer itself does not depend on the lighting.
     With ``lod_threshold`` the vertex hierarchy is built (or ``tree`` used) and only the vertices of
-    :func:`transfer_cut` keep their diffuse transfer vectors in the store; the rest are completed on reading.
+    :func:`transfer_cut` keep their diffuse transfer vectors and glossy matrices (only those are baked) in the
+    store; the rest are completed on reading (T-15).
     """
     device = resolve_device(device)
     if out is not None:
@@ -392,10 +415,9 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     ks = np.array([m.ks for m in scene.materials])
     gids = np.nonzero(geom.referenced & (ks[scene.material_id] > 0))[0].astype(np.int32) if glossy else np.zeros(0, np.int32)
     gorder = glossy_order or order
-    gmat = glossy_transfer(geom, gids, order=gorder, lighting_order=order, rays=rays, mode=glossy_mode,
-                           rotate=rotate, seed=seed, jobs=jobs) if len(gids) else None
     cut_nodes = None
     hierarchy_seconds = None
+    gkept = gids  # the glossy vertices whose matrices are baked and stored
     if lod_threshold is not None:
         t_h = time.perf_counter()
         if tree is None:
@@ -404,8 +426,11 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
             tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
         hierarchy_seconds = time.perf_counter() - t_h
         cut_nodes = transfer_cut(tree, diffuse.transfer, lod_threshold)
+        gkept = np.intersect1d(gids, tree.vertex[cut_nodes]).astype(np.int32)  # the rest is completed (T-15)
+    gmat = glossy_transfer(geom, gkept, order=gorder, lighting_order=order, rays=rays, mode=glossy_mode,
+                           rotate=rotate, seed=seed, jobs=jobs) if len(gkept) else None
     seconds = time.perf_counter() - t0 - (hierarchy_seconds or 0.0)
-    result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device, cut_nodes, tree)
+    result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device, cut_nodes, tree, gkept)
     if out is None:
         return result
     env = None
@@ -414,7 +439,7 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
                {"source": environment.source, "kind": environment.kind, "resolution": environment.resolution})
     result.path = write_transfer_store(
         Path(out), scene, overwrite=overwrite, diffuse=diffuse.transfer, glossy_ids=gids, glossy=gmat,
-        cut_nodes=cut_nodes, tree=tree, hierarchy_seconds=hierarchy_seconds, environment=env,
+        glossy_kept_ids=gkept if cut_nodes is not None else None, cut_nodes=cut_nodes, tree=tree, hierarchy_seconds=hierarchy_seconds, environment=env,
         attrs=dict(
             source=str(scene.source),
             sh_order=int(order),
@@ -431,6 +456,9 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
             ray_offset=float(geom.offset),
             lod_threshold=None if cut_nodes is None else float(lod_threshold),
             vertices_kept=int(geom.referenced.sum() if cut_nodes is None else len(cut_nodes)),
+            glossy_kept=int(len(gkept)),
+            mirror_paths=bool(mode == "interreflected" and geom.mirror is not None),
+            max_mirror=MAX_MIRROR if mode == "interreflected" and geom.mirror is not None else None,
             hierarchy_seconds=hierarchy_seconds,
             bake_seconds=float(seconds),
             load_seconds=float(t_load),

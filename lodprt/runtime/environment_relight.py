@@ -69,12 +69,12 @@ def relit_radiance(store, lighting, eye=None) -> np.ndarray:
     The glossy term is added where the store holds matrices (needs ``eye``); vertices no face uses stay 0.
     """
     rad = diffuse_radiance(store.diffuse(), lighting)
-    ids = store.read("transfer/glossy_vertex_ids")
-    if len(ids) and eye is not None and store.has("transfer/glossy"):
+    ids, matrices = store.glossy()  # a LOD store's are completed (T-15)
+    if len(ids) and eye is not None and matrices is not None:
         mid = store.read("scene/material_id")[ids]
         ks = store.read("materials/ks")[mid]
         shin = store.read("materials/shininess")[mid]
-        rad[ids] += glossy_radiance(store.read("transfer/glossy"), store.read("scene/positions")[ids].astype(np.float64),
+        rad[ids] += glossy_radiance(matrices, store.read("scene/positions")[ids].astype(np.float64),
                                     store.read("scene/normals")[ids].astype(np.float64), ks, shin, lighting, eye)
     return rad
 

@@ -27,8 +27,12 @@ FORMAT_NAME = "lodprt"
 FORMAT_VERSION = 1
 #: the ``format`` of an environment transfer store (``lodprt.store.transfer_store``)
 TRANSFER_FORMAT = "lodprt-transfer"
+#: the ``format`` of a volume transfer store and of a neighbourhood transfer store (``lodprt.store.volume_store``,
+#: ``lodprt.store.neighbourhood_store``; docs/VOLUMES.md)
+VOLUME_FORMAT = "lodprt-volume"
+NEIGHBOURHOOD_FORMAT = "lodprt-neighbourhood"
 #: every store format lodprt writes through ``StoreWriter``
-KNOWN_FORMATS = (FORMAT_NAME, TRANSFER_FORMAT)
+KNOWN_FORMATS = (FORMAT_NAME, TRANSFER_FORMAT, VOLUME_FORMAT, NEIGHBOURHOOD_FORMAT)
 #: owner record inside a partial folder (and inside a parked ``.replaced-<pid>`` store while a commit runs):
 #: host, pid, boot id and process start time of the writer, so a later bake can tell a dead writer from a live one
 #: even when the pid has been reused. Removed before the folder becomes the store (zarr warns about unknown files).
@@ -232,6 +236,26 @@ def prepare_destination(path: str | os.PathLike, *, overwrite: bool, format: str
     check_destination(path, overwrite=overwrite, format=format, what=what)
 
 
+def dead_partials(path: str | os.PathLike, format: str = FORMAT_NAME) -> list[Path]:
+    """Partial folders ``<name>.partial-<pid>`` of ``path`` left by a writer that is no longer running and holding
+    a zarr group of ``format`` (its root attributes were written): what ``bake --resume`` may adopt, newest first."""
+    path = Path(path)
+    found = []
+    if path.parent.is_dir():
+        for folder, kind, pid in _leftovers(path):
+            if kind == "partial" and store_format(folder) == format:
+                if writer_alive(_read_owner(folder) or {"pid": pid}) is False:
+                    found.append(folder)
+    return found
+
+
+def _claim(folder: Path) -> None:
+    """Write this process' owner record into ``folder`` in one step (a torn record would read as no record)."""
+    tmp = folder / f"{OWNER_FILE}.{os.getpid()}"
+    tmp.write_text(json.dumps(process_identity()))
+    os.replace(tmp, folder / OWNER_FILE)
+
+
 class StoreWriter:
     """Creates the store in a partial folder; ``commit()`` moves it into place.
 
@@ -240,14 +264,28 @@ class StoreWriter:
     """
 
     def __init__(self, path: str | os.PathLike, *, overwrite: bool, format: str = FORMAT_NAME,
-                 what: str = "lodprt store"):
+                 what: str = "lodprt store", adopt: str | os.PathLike | None = None):
         import zarr
 
         self.path = Path(path)
         self.format, self.what = format, what
+        self.partial = self.path.with_name(f"{self.path.name}.partial-{os.getpid()}")
+        if adopt is not None:  # resume a dead writer's partial folder (one of dead_partials): it becomes ours
+            check_destination(self.path, overwrite=overwrite, format=format, what=what)
+            adopt = Path(adopt)
+            try:
+                _claim(adopt)  # first our record (a live owner: nobody tidies it away), then our name
+                if adopt != self.partial:
+                    adopt.rename(self.partial)
+                _claim(self.partial)
+            except OSError as exc:
+                raise StoreError(f"{adopt}: could not take over this interrupted bake ({exc}); another "
+                                 "bake may be resuming it") from exc
         prepare_destination(self.path, overwrite=overwrite, format=format, what=what)
         self.overwrite = overwrite
-        self.partial = self.path.with_name(f"{self.path.name}.partial-{os.getpid()}")
+        if adopt is not None:
+            self.root = zarr.open_group(str(self.partial), mode="a", zarr_format=3)
+            return
         if self.partial.exists():  # this process' own, from an earlier writer of the same path
             if _read_owner(self.partial) is None and store_format(self.partial) not in KNOWN_FORMATS:
                 raise StoreError(f"{self.partial}: exists and is not a lodprt partial store; refusing to replace it")

@@ -12,7 +12,10 @@ from lodprt.errors import StoreError
 from lodprt.store.bake_store import TRANSFER_FORMAT, StoreWriter, prepare_destination, store_format
 
 # TRANSFER_FORMAT ("lodprt-transfer") is defined next to the point-light format in bake_store, which refuses it
-TRANSFER_FORMAT_VERSION = 1
+#: 2: LOD stores keep glossy matrices of the cut only (``transfer/glossy_kept_ids``), ``materials/mirror``
+TRANSFER_FORMAT_VERSION = 2
+#: versions this reader reads (a version-1 store has neither of version 2's fields and reads as before)
+READABLE_VERSIONS = (1, 2)
 #: what messages call a transfer store
 WHAT = "lodprt transfer store"
 
@@ -28,7 +31,8 @@ def prepare_transfer_destination(path: str | os.PathLike, *, overwrite: bool) ->
 
 
 def write_transfer_store(path: str | os.PathLike, scene, *, overwrite: bool, diffuse: np.ndarray,
-                         glossy_ids: np.ndarray, glossy: np.ndarray | None = None, cut_nodes: np.ndarray | None = None,
+                         glossy_ids: np.ndarray, glossy: np.ndarray | None = None,
+                         glossy_kept_ids: np.ndarray | None = None, cut_nodes: np.ndarray | None = None,
                          tree=None, hierarchy_seconds: float | None = None, environment: tuple | None = None,
                          attrs: dict) -> Path:
     """Write a ``lodprt-transfer`` store at ``path`` through :class:`StoreWriter` (a killed write never touches
@@ -36,7 +40,8 @@ def write_transfer_store(path: str | os.PathLike, scene, *, overwrite: bool, dif
 
     scene: the baked :class:`lodprt.model.scene.Scene` (geometry and materials are stored); diffuse (V, 3, n*n)
     transfer of every vertex; glossy_ids (G,) and glossy (G, g*g, n*n) or None; with ``cut_nodes`` (LOD) only the
-    vertices of those nodes of ``tree`` keep their diffuse vectors, and the hierarchy is stored
+    vertices of those nodes of ``tree`` keep their diffuse vectors, ``glossy`` then holds the matrices of
+    ``glossy_kept_ids`` (the glossy vertices among them, sorted), and the hierarchy is stored
     (``hierarchy_seconds`` its build time); environment: None or (coefficients (3, n*n), {"source", "kind",
     "resolution"}), the default lighting; attrs: the bake's root attributes after ``format``, ``format_version``
     and ``lodprt_version`` (docs/FORMAT.md).
@@ -53,6 +58,7 @@ def write_transfer_store(path: str | os.PathLike, scene, *, overwrite: bool, dif
         arr("materials/kd", np.array([m.kd for m in scene.materials], np.float32))
         arr("materials/ks", np.array([m.ks for m in scene.materials], np.float32))
         arr("materials/shininess", np.array([m.shininess for m in scene.materials], np.float32))
+        arr("materials/mirror", np.array([getattr(m, "mirror", False) for m in scene.materials], bool))
         if cut_nodes is None:
             arr("transfer/diffuse", diffuse)
         else:
@@ -64,6 +70,8 @@ def write_transfer_store(path: str | os.PathLike, scene, *, overwrite: bool, dif
                 arr(f"hierarchy/{name}", a)
             writer.attrs("hierarchy", levels=tree.levels, seconds=hierarchy_seconds)
         arr("transfer/glossy_vertex_ids", glossy_ids)
+        if cut_nodes is not None and glossy_kept_ids is not None:
+            arr("transfer/glossy_kept_ids", np.asarray(glossy_kept_ids, np.int32))
         if glossy is not None:
             arr("transfer/glossy", glossy)
         if environment is not None:
@@ -76,6 +84,24 @@ def write_transfer_store(path: str | os.PathLike, scene, *, overwrite: bool, dif
     except BaseException:
         writer.abort()
         raise
+
+
+def complete_glossy(h, positions, normals, cut_nodes, kept_ids, matrices, glossy_ids) -> np.ndarray:
+    """Glossy matrices of every glossy vertex ``glossy_ids`` (G,) from those of ``kept_ids`` (K_g,), the glossy
+    vertices of the cut (T-15, as :func:`complete_transfer`): (G, g*g, n*n) float64, exact at ``kept_ids``.
+
+    The cut's other vertices (materials without ks) enter as zeros; a collapse never joins two objects, so glossy
+    vertices complete from glossy neighbours alone."""
+    cut_nodes = np.asarray(cut_nodes)
+    cut_vertices = h.vertex[cut_nodes]
+    m = np.asarray(matrices)
+    full = np.zeros((len(cut_nodes),) + m.shape[1:], np.float64)
+    by_vertex = np.argsort(cut_vertices)
+    at = by_vertex[np.minimum(np.searchsorted(cut_vertices, kept_ids, sorter=by_vertex), len(by_vertex) - 1)]
+    if len(kept_ids) != len(m) or not np.array_equal(cut_vertices[at], kept_ids):
+        raise StoreError("glossy completion: every kept glossy vertex must be a vertex of the cut, one matrix each")
+    full[at] = m
+    return complete_transfer(h, positions, normals, cut_nodes, full)[np.asarray(glossy_ids)]
 
 
 def complete_transfer(h, positions, normals, cut_nodes, coefficients) -> np.ndarray:
@@ -103,9 +129,9 @@ class TransferStore:
                              "bake one with lodprt bake-environment)")
         self.root = zarr.open_group(str(self.path), mode="r")
         self.attrs = dict(self.root.attrs)
-        if self.attrs.get("format_version") != TRANSFER_FORMAT_VERSION:
+        if self.attrs.get("format_version") not in READABLE_VERSIONS:
             raise StoreError(f"{self.path}: format_version {self.attrs.get('format_version')!r}; this lodprt reads "
-                             f"version {TRANSFER_FORMAT_VERSION}")
+                             f"versions {', '.join(map(str, READABLE_VERSIONS))}")
 
     def read(self, name: str) -> np.ndarray:
         try:
@@ -129,12 +155,34 @@ class TransferStore:
         if not hasattr(self, "_diffuse"):
             t = self.read("transfer/diffuse")
             if self.has("transfer/cut_nodes"):
-                from lodprt.model.hierarchy import Hierarchy
-
-                arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS if self.has(f"hierarchy/{name}")}
-                tree = Hierarchy.from_arrays(arrays)
-                t = complete_transfer(tree, self.read("scene/positions").astype(np.float64),
+                t = complete_transfer(self._hierarchy(), self.read("scene/positions").astype(np.float64),
                                       self.read("scene/normals").astype(np.float64), self.read("transfer/cut_nodes"),
                                       t.astype(np.float64)).astype(np.float32)
             self._diffuse = t
         return self._diffuse
+
+    def _hierarchy(self):
+        from lodprt.model.hierarchy import Hierarchy
+
+        arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS if self.has(f"hierarchy/{name}")}
+        return Hierarchy.from_arrays(arrays)
+
+    def glossy(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """(ids (G,), matrices (G, g*g, n*n) float32 or None): the glossy matrix of every glossy vertex; a LOD
+        store's matrices at vertices it did not keep are completed (T-15)."""
+        if not hasattr(self, "_glossy"):
+            ids = self.read("transfer/glossy_vertex_ids")
+            m = self.read("transfer/glossy") if self.has("transfer/glossy") else None
+            if self.has("transfer/glossy_kept_ids") and len(ids):
+                kept = self.read("transfer/glossy_kept_ids")
+                if m is None or len(kept) == 0:
+                    raise StoreError(f"{self.path}: field 'transfer/glossy': a LOD store with glossy vertices keeps "
+                                     "none of their matrices")
+                if len(kept) != len(m):
+                    raise StoreError(f"{self.path}: field 'transfer/glossy' has {len(m)} rows for {len(kept)} "
+                                     "'transfer/glossy_kept_ids'")
+                m = complete_glossy(self._hierarchy(), self.read("scene/positions").astype(np.float64),
+                                    self.read("scene/normals").astype(np.float64), self.read("transfer/cut_nodes"),
+                                    kept, m.astype(np.float64), ids).astype(np.float32)
+            self._glossy = (ids, m)
+        return self._glossy

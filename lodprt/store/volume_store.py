@@ -1,0 +1,113 @@
+"""Volume transfer store (``lodprt-volume``, docs/VOLUMES.md "Store"): writing a volumetric self-transfer bake and
+reading it back. The bake itself is :mod:`lodprt.precompute.volume`.
+
+Layout: root attributes ``format = "lodprt-volume"``, ``format_version``, ``lodprt_version``, the bake's settings;
+``volume/density`` (X, Y, Z) float32 sigma_t, ``volume`` attributes ``lo``, ``hi``, ``albedo``;
+``transfer/vectors`` (X, Y, Z, 3, n*n) float32; optionally ``environment/coefficients`` (3, n*n).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from lodprt.errors import StoreError
+from lodprt.store.bake_store import VOLUME_FORMAT, StoreWriter, prepare_destination, store_format
+
+VOLUME_FORMAT_VERSION = 1
+WHAT = "lodprt volume store"
+
+
+def is_volume_store(path) -> bool:
+    return store_format(path) == VOLUME_FORMAT
+
+
+def prepare_volume_destination(path: str | os.PathLike, *, overwrite: bool) -> None:
+    """Tidy leftovers of interrupted bakes of ``path`` and refuse to replace anything but a volume store."""
+    prepare_destination(Path(path), overwrite=overwrite, format=VOLUME_FORMAT, what=WHAT)
+
+
+def write_volume_store(path: str | os.PathLike, volume, *, overwrite: bool, transfer: np.ndarray,
+                       environment: tuple | None = None, attrs: dict) -> Path:
+    """Write a ``lodprt-volume`` store at ``path`` (atomic: a killed write never touches ``path``); returns it.
+
+    volume: the baked :class:`lodprt.model.volume.Volume`; transfer (X, Y, Z, 3, n*n); environment: None or
+    (coefficients (3, n*n), {"source", "kind", "resolution"}); attrs: the bake's root attributes.
+    """
+    from lodprt.version import __version__
+
+    t = np.asarray(transfer, np.float32)
+    if t.shape[:4] != volume.shape + (3,):
+        raise StoreError(f"{path}: transfer {t.shape} does not fit the volume grid {volume.shape}")
+    writer = StoreWriter(path, overwrite=overwrite, format=VOLUME_FORMAT, what=WHAT)
+    try:
+        writer.array("volume/density", volume.density.astype(np.float32))
+        writer.attrs("volume", lo=volume.lo.tolist(), hi=volume.hi.tolist(), albedo=volume.albedo.tolist())
+        writer.array("transfer/vectors", t)
+        if environment is not None:
+            coefficients, env_attrs = environment
+            writer.array("environment/coefficients", np.asarray(coefficients, np.float64))
+            writer.attrs("environment", **env_attrs)
+        writer.attrs(format=VOLUME_FORMAT, format_version=VOLUME_FORMAT_VERSION, lodprt_version=__version__,
+                     shape=list(volume.shape), **attrs)
+        return writer.commit()
+    except BaseException:
+        writer.abort()
+        raise
+
+
+class VolumeStore:
+    """Read access to a ``lodprt-volume`` store."""
+
+    def __init__(self, path):
+        import zarr
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise StoreError(f"{self.path}: no such store")
+        if not is_volume_store(self.path):
+            raise StoreError(f"{self.path}: not a lodprt volume store (zarr.json without attribute "
+                             f"format='{VOLUME_FORMAT}'; bake one with lodprt bake-volume)")
+        self.root = zarr.open_group(str(self.path), mode="r")
+        self.attrs = dict(self.root.attrs)
+        if self.attrs.get("format_version") != VOLUME_FORMAT_VERSION:
+            raise StoreError(f"{self.path}: format_version {self.attrs.get('format_version')!r}; this lodprt reads "
+                             f"version {VOLUME_FORMAT_VERSION}")
+
+    def read(self, name: str) -> np.ndarray:
+        try:
+            return self.root[name][...]
+        except KeyError as exc:
+            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
+
+    def has(self, name: str) -> bool:
+        try:
+            self.root[name]
+            return True
+        except KeyError:
+            return False
+
+    @property
+    def order(self) -> int:
+        return int(self.attrs["sh_order"])
+
+    def volume(self):
+        """The baked :class:`lodprt.model.volume.Volume` (density, box, albedo)."""
+        from lodprt.model.volume import Volume
+
+        a = dict(self.root["volume"].attrs)
+        try:
+            return Volume(self.read("volume/density"), np.array(a["lo"]), np.array(a["hi"]), np.array(a["albedo"]),
+                          str(self.attrs.get("source", self.path)))
+        except KeyError as exc:
+            raise StoreError(f"{self.path}: volume attribute {exc} is missing") from exc
+
+    def transfer(self) -> np.ndarray:
+        """(X, Y, Z, 3, n*n) float32 transfer vectors."""
+        t = self.read("transfer/vectors")
+        d = self.root["volume/density"].shape
+        if t.ndim != 5 or t.shape[:4] != tuple(d) + (3,):
+            raise StoreError(f"{self.path}: transfer/vectors {t.shape} does not fit volume/density {tuple(d)}")
+        return t
