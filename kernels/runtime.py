@@ -103,9 +103,10 @@ def view_errors(
     half_h: float,  # In: half the screen height in pixels
     diag: float,  # In: screen diagonal in pixels
     focal_px: float,  # In: focal length in pixels, (height / 2) / tan(fov / 2)
-    used: wp.array(dtype=wp.int32),  # In: (U,) light samples with a non-zero weight
-    weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample (T-12, intensities)
+    used: wp.array(dtype=wp.int32),  # In: (U,) sample slots with a non-zero weight
+    weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every sample slot (T-12, intensities)
     box_centre: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box centre / white per node
+    #                                                  and sample slot
     box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
     detail: wp.array3d(dtype=wp.float32),  # In: (N - V, S, C) S-2 bound of the completion residual / white
     criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
@@ -200,9 +201,9 @@ def relight(
     positions: wp.array(dtype=wp.vec3),  # In: (V,) vertex positions
     normals: wp.array(dtype=wp.vec3),  # In: (V,) vertex normals (view direction for an eye on the vertex)
     eye: wp.vec3,  # In: camera position
-    used: wp.array(dtype=wp.int32),  # In: (U,) light samples with a non-zero weight
-    weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every light sample
-    coeffs: wp.array4d(dtype=wp.float32),  # In: (V, S, C, ncoef) completed coefficients of every sample
+    used: wp.array(dtype=wp.int32),  # In: (U,) sample slots with a non-zero weight
+    weights: wp.array2d(dtype=wp.float32),  # In: (S, 3) RGB weight of every sample slot
+    coeffs: wp.array4d(dtype=wp.float32),  # In: (V, S, C, ncoef) completed coefficients of every sample slot
     basis: wp.array2d(dtype=wp.float32),  # Scratch: (A, >= ncoef); ncoef = 1 (diffuse-only store) or order^2
     out_coeffs: wp.array3d(dtype=wp.float32),  # Out: (A, 3, ncoef) interpolated RGB coefficients
     radiance: wp.array2d(dtype=wp.float32),  # Out: (A, 3) radiance toward the eye (T-7)

@@ -69,13 +69,13 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
     det = np.zeros((len(nodes), 3))
     internal = nodes - rt.h.num_vertices
     detail = rt.detail
-    for j in rt.used_samples:
-        mid = (rt.box_centre[internal, j].astype(np.float64) * y[:, None, :]).sum(-1)  # (K, C)
-        rad = (rt.box_half[internal, j].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1)
+    for j, slot in zip(rt.used_samples, rt.used_slots):  # each sample in use and the cache slot holding it
+        mid = (rt.box_centre[internal, slot].astype(np.float64) * y[:, None, :]).sum(-1)  # (K, C)
+        rad = (rt.box_half[internal, slot].astype(np.float64) * np.abs(y)[:, None, :]).sum(-1)
         w = rt.sample_weights[j][None, :]  # C = 1 (grey) broadcasts over R, G, B
         hi += (mid + rad) * w
         lo += (mid - rad) * w
-        det += detail[internal, j].astype(np.float64) * np.abs(w)  # S-2: (K, C) bounds toward any direction
+        det += detail[internal, slot].astype(np.float64) * np.abs(w)  # S-2: (K, C) bounds toward any direction
     e_lumi = np.clip((display(hi) - display(lo)).max(1), 0.0, 1.0)
     depth = np.c_[p, np.ones(len(p))] @ rt.vp[3]  # clip w of the node centre
     foot = np.where(depth > r, np.minimum(r * rt.focal_px() / np.where(depth > r, depth, 1.0), 1e9), 1e9)

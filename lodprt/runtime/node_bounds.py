@@ -1,6 +1,6 @@
-"""Per-node bounds the view cut reads every frame, made once per store and white point: the T-14 coefficient
-boxes (e_lumi) and the S-2 detail bounds (the screen criterion), per light sample and coefficient, bottom-up over
-the vertex hierarchy (docs/RUNTIME.md)."""
+"""Per-node bounds the view cut reads every frame, made once per light sample (as ``lodprt.runtime.samples.
+SampleCache`` completes it) and white point: the T-14 coefficient boxes (e_lumi) and the S-2 detail bounds (the
+screen criterion), bottom-up over the vertex hierarchy (docs/RUNTIME.md)."""
 
 from __future__ import annotations
 
@@ -24,35 +24,33 @@ def radiance_bound(r: np.ndarray, C: int, n: int) -> np.ndarray:
     return out
 
 
-def detail_bounds(h, coeffs: np.ndarray, white: float, plan, faces: np.ndarray, levels: list) -> np.ndarray:
-    """S-2 per light sample and channel: for each internal node, the largest radiance difference toward any view
-    direction (``radiance_bound``) of (a) C(v) - sum_j w_j C(q_j) over the collapses in its subtree (T-15
-    weights over the ring the collapse removed v from) and (b) C(v) - C(q) over its leaves v and their original
-    neighbours q, in units of ``white``: (N - V, S, C) float32. (a) is zero where the completed field is linear
-    (T-15 has linear precision); (b) is one edge's step, small on smooth fields and large at a shadow or
-    highlight boundary that runs next to the subtree (between two subtrees, where neither's own collapses see
-    it). One number per sample and channel keeps the per-frame read to S x C values a node."""
+def detail_bounds(h, c: np.ndarray, white: float, plan, rings: tuple, levels: list) -> np.ndarray:
+    """S-2 for one light sample's completed coefficients ``c`` (V, C, ncoef): for each internal node, the largest
+    radiance difference toward any view direction (``radiance_bound``) of (a) C(v) - sum_j w_j C(q_j) over the
+    collapses in its subtree (T-15 weights over the ring the collapse removed v from) and (b) C(v) - C(q) over its
+    leaves v and their original neighbours q (``rings = leaf_rings(faces)``), in units of ``white``: (N - V, C)
+    float32. (a) is zero where the completed field is linear (T-15 has linear precision); (b) is one edge's step,
+    small on smooth fields and large at a shadow or highlight boundary that runs next to the subtree (between two
+    subtrees, where neither's own collapses see it). One number per channel keeps the per-frame read to a few
+    values a node."""
     V, N = h.num_vertices, h.num_nodes
-    _, S, C, n = coeffs.shape
-    detail = np.zeros((N - V, S, C), np.float32)
+    _, C, n = c.shape
     if N == V:
-        return detail
+        return np.zeros((0, C), np.float32)
     c0, c1 = h.children[:, 0], h.children[:, 1]
-    ring_v, ring_q, starts = leaf_rings(faces)
-    for j in range(S):
-        c = coeffs[:, j].reshape(V, C * n) / np.float32(white)
-        d = np.zeros((N, C), np.float32)
-        if len(ring_v):  # leaves: the largest step to an original neighbour (a shadow edge between subtrees)
-            d[ring_v[starts]] = np.maximum.reduceat(radiance_bound(c[ring_v] - c[ring_q], C, n), starts, axis=0)
-        for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
-            rows = slice(start, min(start + CHUNK, N - V))
-            r = max(int(plan.ring_len[rows].max()), 1)
-            interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
-            d[V + rows.start:V + rows.stop] = radiance_bound(c[plan.vertex[rows]] - interp, C, n)  # T-15 residual
-        for nodes in levels:
-            d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
-        detail[:, j] = d[V:]
-    return detail
+    ring_v, ring_q, starts = rings
+    c = c.reshape(V, C * n) / np.float32(white)
+    d = np.zeros((N, C), np.float32)
+    if len(ring_v):  # leaves: the largest step to an original neighbour (a shadow edge between subtrees)
+        d[ring_v[starts]] = np.maximum.reduceat(radiance_bound(c[ring_v] - c[ring_q], C, n), starts, axis=0)
+    for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
+        rows = slice(start, min(start + CHUNK, N - V))
+        r = max(int(plan.ring_len[rows].max()), 1)
+        interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
+        d[V + rows.start:V + rows.stop] = radiance_bound(c[plan.vertex[rows]] - interp, C, n)  # T-15 residual
+    for nodes in levels:
+        d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
+    return d[V:]
 
 
 def leaf_rings(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,25 +72,24 @@ def height_levels(h) -> list[np.ndarray]:
     return [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
 
 
-def coefficient_boxes(h, coeffs: np.ndarray, white: float, levels: list) -> tuple[np.ndarray, np.ndarray]:
-    """Per light sample, the box of every completed coefficient over each internal node's leaves, in units of
-    ``white``: centre and half-width, each (N - V, S, C, ncoef) float16 (clipped to float16's range), made
-    bottom-up one height level at a time (children always sit on lower levels)."""
+def coefficient_boxes(h, c: np.ndarray, white: float, levels: list) -> np.ndarray:
+    """T-14 for one light sample's completed coefficients ``c`` (V, C, ncoef): the box of every coefficient over
+    each internal node's leaves, in units of ``white``: (N - V, 2, C, ncoef) float16, centre then half-width
+    (clipped to float16's range), made bottom-up one height level at a time (children always sit on lower
+    levels)."""
     V, N = h.num_vertices, h.num_nodes
-    _, S, C, n = coeffs.shape
-    centre = np.zeros((N - V, S, C, n), np.float16)
-    half = np.zeros((N - V, S, C, n), np.float16)
+    _, C, n = c.shape
+    out = np.zeros((N - V, 2, C, n), np.float16)
     if N == V:
-        return centre, half
+        return out
     c0, c1 = h.children[:, 0], h.children[:, 1]
     big = float(np.finfo(np.float16).max)
-    for j in range(S):
-        mn = np.empty((N, C * n), np.float32)
-        mn[:V] = coeffs[:, j].reshape(V, C * n) / np.float32(white)
-        mx = mn.copy()
-        for nodes in levels:
-            mn[nodes] = np.minimum(mn[c0[nodes]], mn[c1[nodes]])
-            mx[nodes] = np.maximum(mx[c0[nodes]], mx[c1[nodes]])
-        centre[:, j] = np.clip(0.5 * (mx[V:] + mn[V:]), -big, big).reshape(N - V, C, n)
-        half[:, j] = np.clip(0.5 * (mx[V:] - mn[V:]), 0, big).reshape(N - V, C, n)
-    return centre, half
+    mn = np.empty((N, C * n), np.float32)
+    mn[:V] = c.reshape(V, C * n) / np.float32(white)
+    mx = mn.copy()
+    for nodes in levels:
+        mn[nodes] = np.minimum(mn[c0[nodes]], mn[c1[nodes]])
+        mx[nodes] = np.maximum(mx[c0[nodes]], mx[c1[nodes]])
+    out[:, 0] = np.clip(0.5 * (mx[V:] + mn[V:]), -big, big).reshape(N - V, C, n)
+    out[:, 1] = np.clip(0.5 * (mx[V:] - mn[V:]), 0, big).reshape(N - V, C, n)
+    return out

@@ -22,13 +22,13 @@ import typing
 
 import numpy as np
 
-from lodprt.model import sh
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import concat_ranges, map_faces
 from lodprt.runtime import node_bounds
 from lodprt.runtime.camera import Camera, as_camera, clip_planes, view_projection
 from lodprt.runtime.frames import Frame, StoreFrames
 from lodprt.runtime.lights import LightInterpolator, check_lights
+from lodprt.runtime.samples import SampleCache, default_white
 from lodprt.runtime.view_cut import Cut
 
 log = logging.getLogger(__name__)
@@ -83,13 +83,16 @@ class Runtime:
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
     (``lodprt.runtime.lights``); max_passes: refinement passes per frame after the first; lod=False: the full mesh;
     device: the Warp device of the per-frame kernels (default: CUDA when present, else the CPU);
-    progress(done, total): called as the light samples are completed.
+    cache_bytes: completed light samples (and their per-node bounds) kept at most, in bytes (default 1 GiB; never
+    fewer than one frame's samples): a sample is completed (T-15) when the lights first give it a weight
+    (``lodprt.runtime.samples.SampleCache``);
+    progress(done, total): called as the light samples a frame needs are completed.
     """
 
     def __init__(self, store, *, error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
                  pixel_tolerance: float = PIXEL_TOLERANCE, triangle_budget: int | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 2,
-                 lod: bool = True, device: str | None = None, progress=None):
+                 lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None):
         from lodprt.devices import resolve_device
 
         if criterion not in CRITERIA:
@@ -119,25 +122,15 @@ class Runtime:
         self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
                                         weighting=weighting, outside=outside)
         V = h.num_vertices
-        S = store.num_samples
         self.order = store.sh_order
-        # T-15 once per sample (cached, SPEC 5), float32, vertex-major (V, S, C, ncoef): a vertex's samples are
-        # one contiguous block for the per-frame gathers
-        first = store.complete(0).astype(np.float32)
-        self.coeffs = np.empty((first.shape[0], S) + first.shape[1:], np.float32)
-        self.coeffs[:, 0] = first
-        for k in range(S):
-            if k:
-                self.coeffs[:, k] = store.complete(k)
-            if progress:
-                progress(k + 1, S)
-        self.channels = self.coeffs.shape[2]
-        self.ncoef = self.coeffs.shape[3]
-        self.white = float(white) if white is not None else self._default_white()
+        # T-15 per sample when the lights first use it (SPEC 5), float32 slots, vertex-major (V, slots, C, ncoef)
+        self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress)
+        self.channels, self.ncoef = self.samples.C, self.samples.n
+        self.white = float(white) if white is not None else default_white(store)
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
-        self._bounds: dict[str, np.ndarray] = {}
-        self._levels = None  # internal nodes by height, for the bounds  # per-node bounds, each made when the view cut first needs it
+        self._levels = None  # internal nodes by height, for the per-node bounds
+        self._synced = -1  # the sample cache's version the device arrays hold
         # per-node geometry for the error terms
         self.node_pos = self.positions[h.vertex]
         internal = h.children[:, 1] >= 0
@@ -168,41 +161,59 @@ class Runtime:
         self._stamp = np.full(h.num_nodes, -1, np.int64)
         self._refresh_all = True  # the next frame evaluates every candidate (set by jumps and new bounds)
         self.camera: Camera | None = None
+        if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
+            self._node_bounds("detail" if criterion == "screen" else "box_centre")
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
     # -- set-up ------------------------------------------------------------------------------------------------
     @property
     def box_centre(self) -> np.ndarray:
-        """T-14 coefficient box centres (N - V, S, C, ncoef) float16 (``node_bounds.coefficient_boxes``)."""
+        """T-14 coefficient box centres (N - V, slots, C, ncoef) float16 (``node_bounds.coefficient_boxes``), one
+        slot per completed sample (``used_slots``)."""
         return self._node_bounds("box_centre")
 
     @property
     def box_half(self) -> np.ndarray:
-        """T-14 coefficient box half-widths (N - V, S, C, ncoef) float16."""
+        """T-14 coefficient box half-widths (N - V, slots, C, ncoef) float16."""
         return self._node_bounds("box_half")
 
     @property
     def detail(self) -> np.ndarray:
-        """S-2 detail bounds (N - V, S, C) float32 (``lodprt.runtime.node_bounds.detail_bounds``)."""
+        """S-2 detail bounds (N - V, slots, C) float32 (``lodprt.runtime.node_bounds.detail_bounds``)."""
         return self._node_bounds("detail")
 
     def _node_bounds(self, name: str) -> np.ndarray:
-        """One of the per-node bounds, made (and put on the device) the first time it is asked for: the screen
-        criterion's frames need only ``detail``, T-14's only the boxes."""
-        if name not in self._bounds:
+        """One of the per-node bounds, per sample slot, made for every completed sample from the first time it is
+        asked for on: the screen criterion's frames need only ``detail``, T-14's only the boxes."""
+        h, cache = self.h, self.samples
+        key = "detail" if name == "detail" else "boxes"
+        if key not in cache.derived:
             if self._levels is None:
-                self._levels = node_bounds.height_levels(self.h)
-            if name == "detail":
-                made = {"detail": node_bounds.detail_bounds(self.h, self.coeffs, self.white,
-                                                            self.store.completion_plan(), self.faces, self._levels)}
+                self._levels = node_bounds.height_levels(h)
+            rows, levels, white = h.num_nodes - h.num_vertices, self._levels, self.white
+            if key == "detail":
+                plan, rings = self.store.completion_plan(), node_bounds.leaf_rings(self.faces)
+                cache.derive("detail", lambda c: node_bounds.detail_bounds(h, c, white, plan, rings, levels), rows,
+                             (self.channels,), np.float32)
             else:
-                centre, half = node_bounds.coefficient_boxes(self.h, self.coeffs, self.white, self._levels)
-                made = {"box_centre": centre, "box_half": half}
-            for key, value in made.items():
-                self._bounds[key] = value
-                self._d[key] = self._wp.array(value, dtype=self._wp.float32 if key == "detail" else self._wp.float16,
-                                              device=self.device)
-        return self._bounds[name]
+                cache.derive("boxes", lambda c: node_bounds.coefficient_boxes(h, c, white, levels), rows,
+                             (2, self.channels, self.ncoef), np.float16)
+        arr = cache.derived[key][0]
+        return arr if key == "detail" else arr[:, :, 0] if name == "box_centre" else arr[:, :, 1]
+
+    def _sync_device(self) -> None:
+        """The sample slots and their bounds on the device, as the cache holds them now (on the CPU the Warp arrays
+        share the numpy memory; elsewhere a slot change uploads them again)."""
+        if self._synced == self.samples.version:
+            return
+        wp, dev = self._wp, self.device
+        self._d["coeffs"] = wp.array(self.samples.coeffs, dtype=wp.float32, device=dev, copy=dev != "cpu")
+        for name in ("detail", "box_centre", "box_half"):
+            if ("boxes" if name != "detail" else name) in self.samples.derived:
+                arr = self._node_bounds(name)
+                self._d[name] = wp.array(arr, dtype=wp.float32 if name == "detail" else wp.float16, device=dev,
+                                         copy=dev != "cpu")
+        self._synced = self.samples.version
 
     def _kernel_bounds(self, exact: bool) -> list:
         """The view_errors kernel's box_centre, box_half and detail arrays: the ones its criterion reads (and the
@@ -218,6 +229,7 @@ class Runtime:
         for name in ("box_centre", "box_half", "detail"):
             if name in need:
                 self._node_bounds(name)
+                self._sync_device()
             spare = "placeholder_detail" if name == "detail" else "placeholder"
             out.append(self._d[name] if name in need else self._d[spare])
         return out
@@ -237,7 +249,6 @@ class Runtime:
             "node_pos": v3(self.node_pos), "node_collapsed": v3(self.node_collapsed),
             "error_vector": v3(self.error_vector), "axis": v3(self.axis), "half": f1(self.half),
             "radius": f1(self.radius), "positions": v3(self.positions), "normals": v3(self.normals),
-            "coeffs": wp.array(self.coeffs, dtype=wp.float32, device=dev),
         }
 
     def _launch(self, kernel, rows: int, inputs: list, outputs: list) -> None:
@@ -255,16 +266,13 @@ class Runtime:
             f.result()
 
     def _frame_inputs(self) -> tuple:
+        """The slots of the samples in use and every slot's RGB weight (0 for the others), on the device."""
         wp = self._wp
-        used = wp.array(self.used_samples.astype(np.int32), dtype=wp.int32, device=self.device)
-        weights = wp.array(self.sample_weights.astype(np.float32), dtype=wp.float32, device=self.device)
-        return used, weights
-
-    def _default_white(self) -> float:
-        dc = np.abs(self.coeffs[:, :, :, 0]).max(2) * sh.basis(np.array([0.0, 0.0, 1.0]), 1)[0]
-        dc = dc * float(np.max(self.store.intensity))
-        pos = dc[dc > 0]
-        return float(np.percentile(pos, 99)) if pos.size else 1.0
+        self._sync_device()
+        weights = np.zeros((self.samples.slots, 3), np.float32)
+        weights[self.used_slots] = self.sample_weights[self.used_samples]
+        used = wp.array(self.used_slots.astype(np.int32), dtype=wp.int32, device=self.device)
+        return used, wp.array(weights, dtype=wp.float32, device=self.device)
 
     def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
         """The criterion's error bound (>= 0) and, when given, alpha in [0, 1] (T-14's weight of e_geo)."""
@@ -306,6 +314,7 @@ class Runtime:
         self.lights_clamped = int(moved.sum())
         self.sample_weights = W
         self.used_samples = np.flatnonzero(np.abs(W).sum(1) > 0)
+        self.used_slots = self.samples.ensure(self.used_samples)  # completes the samples not held yet (T-15)
 
     def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
                    near=None, far=None) -> Camera:
@@ -532,7 +541,7 @@ class Runtime:
         ``sum_j W[j, c] C_j`` over the completed light samples (T-12 weights, intensities applied)."""
         ids = np.arange(self.h.num_vertices) if vertex_ids is None else np.asarray(vertex_ids, np.int64)
         u = self.used_samples
-        c = self.coeffs[ids[:, None], u[None, :]]  # (K, U, C, ncoef)
+        c = self.samples.coeffs[ids[:, None], self.used_slots[None, :]]  # (K, U, C, ncoef)
         w = self.sample_weights[u].astype(np.float32)  # (U, 3)
         if self.channels == 1:
             return np.einsum("kui,uc->kci", c[:, :, 0], w, optimize=True)

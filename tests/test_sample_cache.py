@@ -1,0 +1,84 @@
+"""The run time's lazy light samples (``lodprt.runtime.samples.SampleCache``): a Runtime completes only the samples
+its lights use, holds at most ``cache_bytes`` of them (never fewer than one frame needs), and gives the same
+coefficients, radiance and view-cut errors as the stored samples completed one by one (``light_coefficients``)
+however often slots are replaced."""
+
+import numpy as np
+import pytest
+
+from lodprt.errors import LodprtError
+from lodprt.runtime.camera import Camera
+from lodprt.runtime.frames import light_coefficients
+from lodprt.runtime.samples import SampleCache, default_white
+from lodprt.runtime.session import Runtime
+from lodprt.store.bake_store import open_store
+
+
+@pytest.fixture(scope="module")
+def store(bunny_bake):
+    return open_store(bunny_bake)
+
+
+def camera(rt):
+    c = 0.5 * (rt.bounds[0] + rt.bounds[1])
+    ext = float((rt.bounds[1] - rt.bounds[0]).max())
+    return Camera(eye=tuple(c + ext * np.array([0.3, 0.5, 0.9])), target=tuple(c), width=320, height=240)
+
+
+def light_path(store, n):
+    """Lights wandering through the sampled box (each between samples: up to 8 in use)."""
+    lo, hi = np.min(store.light_positions, 0), np.max(store.light_positions, 0)
+    t = np.linspace(0.05, 0.95, n)
+    return lo + (hi - lo) * np.stack([t, 0.5 + 0.3 * np.sin(7 * t), (7 * t) % 1.0], 1)
+
+
+def test_opening_completes_only_the_samples_in_use(store):
+    rt = Runtime(store, device="cpu", lod=False)
+    assert rt.samples.completed == len(rt.used_samples) < store.num_samples
+    assert rt.samples.nbytes <= max(rt.samples.slots, 1) * rt.samples.bytes_per_slot()
+
+
+@pytest.mark.warp_debug
+def test_small_cache_evicts_and_stays_exact(store):
+    per = Runtime(store, device="cpu", lod=False).samples.bytes_per_slot()
+    rt = Runtime(store, device="cpu", cache_bytes=2 * per)  # fewer slots than one frame may need: it grows to that
+    rt.set_camera(camera(rt))
+    big = Runtime(store, device="cpu")  # every sample fits
+    big.set_camera(camera(big))
+    for p in light_path(store, 8):
+        rt.set_lights([p])
+        big.set_lights([p])
+        assert rt.samples.slots <= max(len(rt.used_samples), 2)
+        want = light_coefficients(store, [p])[2]  # the stored samples completed one by one
+        got = rt.coefficients()
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6 * np.abs(want).max())
+        np.testing.assert_array_equal(got, big.coefficients())
+        f = rt.update()
+        g = big.update()
+        np.testing.assert_array_equal(f.vertex_ids, g.vertex_ids)  # the same errors, the same cut
+        np.testing.assert_allclose(f.radiance, g.radiance, rtol=1e-6, atol=1e-7)
+        nodes = np.arange(rt.h.num_vertices, rt.h.num_nodes, 7)
+        np.testing.assert_array_equal(rt.node_errors(nodes).error, big.node_errors(nodes).error)
+    assert rt.samples.completed > rt.samples.slots  # slots were replaced along the way
+
+
+def test_two_lights_grow_the_cache_to_one_frame(store):
+    rt = Runtime(store, device="cpu", lod=False, cache_bytes=0)
+    lo, hi = np.min(store.light_positions, 0), np.max(store.light_positions, 0)
+    lights = [lo + 0.3 * (hi - lo), lo + 0.8 * (hi - lo)]
+    rt.set_lights(lights)
+    assert rt.samples.slots == len(rt.used_samples) > 8 // 2
+    np.testing.assert_allclose(rt.coefficients(), light_coefficients(store, lights)[2], rtol=1e-4, atol=1e-6)
+
+
+def test_default_white_reads_one_sample_at_a_time(store):
+    w = default_white(store)
+    dc = np.concatenate([np.abs(store.sample(k)[1][:, :, 0]).max(1) for k in range(store.num_samples)])
+    assert w == pytest.approx(np.percentile(dc[dc > 0], 99) * 0.28209479177387814 * float(np.max(store.intensity)))
+
+
+def test_bad_cache_size_is_refused(store):
+    with pytest.raises(LodprtError, match="cache_bytes"):
+        SampleCache(store, cache_bytes=-1)
+    with pytest.raises(LodprtError, match="does not exist"):
+        SampleCache(store).ensure([store.num_samples])
