@@ -15,6 +15,10 @@ EPILOG_BAKE = """\
 examples:
   lodprt bake demo -o demo.zarr
   lodprt bake scene.toml -o bunny.zarr --sh-order 4 --overwrite
+  lodprt bake scene.toml -o bunny_gi.zarr --bounces 2 --gi-rays 128 --threshold-deg 0.5   (docs/GI.md)
+  lodprt bake scene.toml -o bunny.zarr --resume          (after a killed bake)
+  lodprt bake finer.toml -o bunny.zarr --add-samples     (finer.toml: the same scene, a finer light grid)
+  lodprt -v bake scene.toml -o bunny.zarr --workers 4    (dask; -v prints the dashboard link)
 SCENE is 'demo' (the embedded default), a TOML scene file (docs/SCENE.md) or a mesh path."""
 
 
@@ -41,6 +45,35 @@ def register(sub) -> None:
     b.add_argument("--full", action="store_true", help="keep every vertex (no light cut)")
     cli_args.add_jobs(b, "one light sample each")
     b.add_argument("--no-hierarchy", action="store_true", help="skip the vertex hierarchy (implies --full: no light cut, no LOD later)")
+    b.add_argument("--resume", action="store_true",
+                   help="continue an interrupted bake of OUT (same scene and settings, checked against what it "
+                   "recorded): keep its finished samples and bake the rest; a finished OUT is left as it is")
+    b.add_argument("--add-samples", action="store_true",
+                   help="extend the existing store OUT to the scene's light grid (a finer grid or a bigger box that "
+                   "contains every old sample position), baking only the new samples (docs/DISTRIBUTED.md)")
+    b.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="bake the light samples on a local dask cluster of N worker processes, --jobs threads each "
+                   "(default 1); needs pip install 'lodprt[distributed]'")
+    b.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="bake the light samples on the running dask cluster at ADDRESS (tcp://host:port); every "
+                   "worker must see OUT's folder at the same path")
+    gi = b.add_argument_group("interreflection (docs/GI.md)")
+    gi.add_argument("--bounces", type=int, default=0, metavar="B",
+                    help="diffuse interreflection passes after the direct light (default 0: direct light only)")
+    gi.add_argument("--bounce-threshold", type=float, default=1e-3, metavar="T",
+                    help="stop the passes early once one carries less than T times the direct light's power "
+                    "(default 1e-3)")
+    gi.add_argument("--gi-rays", type=int, default=64, metavar="R",
+                    help="gathering rays per vertex and pass, cosine-weighted (default 64)")
+    gi.add_argument("--indirect-threshold-deg", type=float, default=10.0, metavar="E",
+                    help="light cut: gather indirect light only on the indirect cut, whose nodes' bounding spheres "
+                    "and normal cones span at most E degrees seen from the nearest surface (default 10); the other "
+                    "vertices are completed (T-15)")
+    b.add_argument("--compress", default="none", metavar="CODEC",
+                   help="store the light samples with a lossy codec (format version 2, docs/FORMAT.md): none "
+                   "(default, float32), f16, q8, q10, q12 (integers per vertex and SH band) or "
+                   "cpca:CLUSTERS:VECTORS[:BITS] (clustered PCA over vertices x samples, e.g. cpca:256:3); the "
+                   "finished store is re-encoded in place, as lodprt compress does")
     b.set_defaults(handler=cmd_bake)
 
 
@@ -52,6 +85,12 @@ def cmd_bake(args) -> int:
     from lodprt.precompute.bake import bake
 
     cli_args.at_least("--jobs", args.jobs, 1)
+    cli_args.at_least("--workers", args.workers, 1)
+    if args.workers is not None and args.scheduler is not None:
+        raise LodprtError("--workers and --scheduler: give one (a local cluster, or the address of a running one)")
+    from lodprt.store.codecs import parse_codec
+
+    parse_codec(args.compress, "--compress")  # a bad codec fails before any work
     device = resolve_device(args.device)  # refuse an unavailable device before loading anything
     scene = load_scene(args.scene)
     n = scene.lights.positions.shape[0]
@@ -72,6 +111,15 @@ def cmd_bake(args) -> int:
             threshold_deg=None if args.full or args.no_hierarchy else args.threshold_deg,
             progress=bars.callback("bake", "sample"),
             hierarchy_progress=bars.callback("hierarchy", "collapse"),
+            resume=args.resume,
+            add_samples=args.add_samples,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            bounces=args.bounces,
+            bounce_threshold=args.bounce_threshold,
+            gi_rays=args.gi_rays,
+            indirect_threshold_deg=args.indirect_threshold_deg,
+            compress=args.compress,
         )
     _report(scene, res)
     return 0
@@ -79,6 +127,14 @@ def cmd_bake(args) -> int:
 
 def _bake_environment(args) -> int:
     """``bake SCENE --environment ENV``: distant-light transfer, as bake-environment with its defaults."""
+    if args.resume or args.add_samples or args.workers is not None or args.scheduler is not None:
+        raise LodprtError("--resume, --add-samples, --workers and --scheduler are point-light bake options; an "
+                          "environment bake runs in one process and starts afresh")
+    if args.bounces:
+        raise LodprtError("--bounces is a point-light option; an environment bake takes its passes from "
+                          "bake-environment --bounces")
+    if args.compress != "none":
+        raise LodprtError("--compress is a point-light option; the transfer store of --environment has no codec")
     if args.full or args.no_hierarchy:
         raise LodprtError("--full and --no-hierarchy are point-light options; an environment bake has no light "
                           "cut (see bake-environment --lod-threshold)")
@@ -92,6 +148,9 @@ def _report(scene, res) -> None:
     import numpy as np
 
     kb = np.mean([s["bytes"] for s in res.samples]) / 1024
+    if res.reused_samples:
+        print(f"{res.reused_samples} of {len(res.samples)} light samples were already in the store; baked "
+              f"{len(res.samples) - res.reused_samples}", file=sys.stderr)
     kept = np.mean([s["vertices_kept"] for s in res.samples])
     print(f"kept {kept:,.0f} of {int(scene.referenced.sum()):,} vertices per sample on average", file=sys.stderr)
     print(

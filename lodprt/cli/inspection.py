@@ -60,6 +60,11 @@ def cmd_info(args) -> int:
               f"{info['hierarchy_depth']}, built in {info['hierarchy_seconds']:.1f} s")
     print(f"  bake {info['bake_seconds']:.2f} s on {info['device']}; {info['bytes_total'] / 1024:,.0f} KiB payload, "
           f"{info['bytes_on_disk'] / 1024:,.0f} KiB on disk")
+    n = max(len(info["samples"]), 1)
+    per = (info["bytes_total"] + info["codec_bytes"]) / n
+    print(f"  codec {info['codec']}: {per / 1024:,.1f} KiB per sample payload"
+          + ("" if info["codec"] == "none" else f" (store-level codec arrays included; float32: "
+             f"{info['bytes_raw_total'] / n / 1024:,.1f} KiB)"))
     print(f"  {'sample':>6} {'position':>30} {'kept':>9} {'lit':>9} {'shadowed':>9} {'KiB':>9}")
     for s in info["samples"]:
         pos = "(" + ", ".join(f"{x:.3g}" for x in s["position"]) + ")"

@@ -1,5 +1,5 @@
 """The ``lodprt`` command line: bake, info, radiance, frames, diff, render, compare, turntable, view, irradiance,
-bake-environment, render-environment, bake-volume, render-volume, bake-neighbourhood, export.
+bake-environment, render-environment, bake-volume, render-volume, bake-neighbourhood, export, compress.
 
 The parser is built from the command modules' ``register`` functions (:mod:`lodprt.cli.bake`,
 :mod:`lodprt.cli.inspection`, :mod:`lodprt.cli.frames`, :mod:`lodprt.cli.display`, :mod:`lodprt.cli.environment`,
@@ -15,10 +15,10 @@ import logging
 import os
 import sys
 
-from lodprt.cli import bake, display, environment, export, frames, inspection, volume
+from lodprt.cli import bake, compress, display, environment, export, frames, inspection, volume
 from lodprt.errors import LodprtError
 
-COMMAND_MODULES = (bake, inspection, frames, display, environment, volume, export)
+COMMAND_MODULES = (bake, compress, inspection, frames, display, environment, volume, export)
 """The command families, in the order ``lodprt --help`` lists their commands."""
 
 

@@ -5,6 +5,8 @@ figure 8, :mod:`lodprt.precompute.light_cut`).
 Samples are independent tasks (``jobs`` Python threads on the CPU, where a Warp launch releases the GIL; one after
 another on CUDA). Left out: shadow rays of back-facing vertices, specular bands when no material has ks > 0, colour
 channels when every material is grey (the light's RGB intensity is applied when reading), unreferenced vertices.
+``bake(compress=CODEC)`` re-encodes the finished store with a lossy codec as format version 2
+(:func:`compress_finished`, :mod:`lodprt.store.codecs`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import math
 import os
 import threading
 import time
+import uuid
 from typing import Callable
 
 import numpy as np
@@ -46,6 +49,7 @@ class BakeResult:
     device: str
     samples: list[dict]
     hierarchy_seconds: float | None = None
+    reused_samples: int = 0  # samples a resumed or extended bake found complete instead of baking them
 
 
 def ray_offset(scene: Scene) -> float:
@@ -111,6 +115,7 @@ class Baker:
         self.offset = ray_offset(scene)
         self.falloff = 1 if scene.lights.falloff == "inverse-square" else 0
         self.radius = float(scene.lights.radius)
+        self.gi = None  # lodprt.precompute.gi.Interreflection when the bake has bounces (gi.attach)
         self._local = threading.local()
 
     def _scratch(self):
@@ -172,7 +177,10 @@ class Baker:
         visible = self.visibility(light)
         self.shade(light, self.ids, visible, s["basis"], s["coeffs"])
         # .numpy() is a view of device memory on the CPU: copy, the next sample on this thread reuses it
-        return s["coeffs"].numpy().copy(), visible.numpy().copy()
+        coeffs = s["coeffs"].numpy().copy()
+        if self.gi is not None:
+            coeffs += self.gi.full(light, visible)  # interreflection (docs/GI.md)
+        return coeffs, visible.numpy().copy()
 
     def sample_cut(self, light: np.ndarray, lightcut, threshold_deg: float):
         """Bake one light sample on its light cut (thesis figure 8).
@@ -180,6 +188,8 @@ class Baker:
         Returns (vertex ids (K,) int32 of the cut, ascending; the cut node standing at each (K,) int32; whether that
         node is dark (K,) uint8; coefficients (K, C, ncoef); visibility of the referenced vertices).
         """
+        if self.gi is not None:
+            return self.gi.sample_cut(light, lightcut, threshold_deg)  # interreflection (docs/GI.md)
         wp = self.wp
         vis = self.visibility(light).numpy().copy()
         V = self.points.shape[0]
@@ -212,11 +222,106 @@ def load_kernels(device: str) -> float:
 
     wp = warp()
     t0 = time.perf_counter()
+    from lodprt.kernels import gi as kgi
     from lodprt.kernels import light_cut as kcut
 
-    for module in (kvis, kshade, kcut):
+    for module in (kvis, kshade, kcut, kgi):
         wp.load_module(module, device=device)
     return time.perf_counter() - t0
+
+
+@dataclasses.dataclass
+class SampleJob:
+    """One bake's light samples as independent tasks: everything a process needs to bake sample ``k`` and write its
+    group into the partial store ``partial`` (None: no store). Threads of this process share one device state
+    (:meth:`device_state`); a dask worker receives the job once and keeps its state for every task (:meth:`run`)."""
+
+    scene: Scene
+    tree: object | None  # the hierarchy, in light-cut mode only
+    sh_order: int
+    device: str
+    threshold_deg: float | None
+    partial: str | None
+    gi: object  # lodprt.precompute.gi.GISettings
+    token: str = dataclasses.field(default_factory=lambda: uuid.uuid4().hex)
+    version: str = dataclasses.field(default_factory=lambda: _version())  # a worker must bake with the same lodprt
+
+    def __post_init__(self):
+        self.lights = self.scene.lights.positions
+
+    def device_state(self):
+        """(Baker, LightCut or None) of this job: BVH, material tables and the hierarchy's arrays on the device."""
+        from lodprt.precompute.gi import attach
+
+        baker = Baker(self.scene, self.sh_order, self.device, np.flatnonzero(self.scene.referenced).astype(np.int32))
+        lightcut = None
+        if self.threshold_deg is not None:
+            from lodprt.precompute.light_cut import LightCut
+
+            lightcut = LightCut(self.tree, baker.points, self.device)
+        if self.gi.bounces:
+            attach(baker, self.scene, self.gi, self.tree if lightcut is not None else None)
+        return baker, lightcut
+
+    def compute(self, baker: Baker, lightcut, k: int):
+        """Bake light sample ``k``: (k, vertex ids, cut arrays, coefficients, visibility, seconds)."""
+        t = time.perf_counter()
+        extra = {}
+        if lightcut is None:
+            coeffs, visible = baker.sample(self.lights[k])
+            kept = baker.ids_host
+        else:
+            kept, nodes, dark, coeffs, visible = baker.sample_cut(self.lights[k], lightcut, self.threshold_deg)
+            extra = {"cut_nodes": nodes, "dark": dark}
+        return k, kept, extra, coeffs, visible, time.perf_counter() - t
+
+    def write(self, k: int, kept, extra: dict, coeffs, visible, seconds: float) -> dict:
+        """Check and record sample ``k``: its group (completion mark last) moves into the store whole."""
+        from lodprt.store.sample_groups import SampleGroupWriter
+
+        _check_finite(self.scene, k, self.lights[k], coeffs)
+        if self.partial is None:
+            return _record(None, k, kept, extra, coeffs, visible, seconds)
+        group = SampleGroupWriter(self.partial, k)
+        try:
+            info = _record(group, k, kept, extra, coeffs, visible, seconds)
+            group.finish()
+        except BaseException:
+            group.abort()
+            raise
+        return info
+
+    def run(self, k: int) -> tuple[dict, float]:
+        """Bake and write sample ``k`` in a worker process: (its statistics, seconds spent loading kernels now).
+        The device state is made at the first task of this job in the process and kept for the next ones."""
+        if _version() != self.version:
+            raise LodprtError(f"a dask worker runs lodprt {_version()}, the client {self.version}: install the same "
+                              "lodprt everywhere (the store records one version)")
+        load = 0.0
+        with _WORKER_LOCK:
+            if _WORKER.get("token") != self.token:
+                _WORKER.clear()  # one job at a time: the previous bake's device arrays go
+                load = load_kernels(self.device)
+                _WORKER.update(token=self.token, state=self.device_state())
+            baker, lightcut = _WORKER["state"]
+        return self.write(*self.compute(baker, lightcut, k)), load
+
+
+_WORKER: dict = {}  # SampleJob.run's device state in this process
+_WORKER_LOCK = threading.Lock()
+
+
+def bake_settings(scene: Scene, sh_order: int, device: str, threshold_deg, hierarchy: bool, gi) -> dict:
+    """The root attributes a bake records before any work, which a resumed or extended bake must match
+    (``lodprt.store.resume``): what decides the coefficients, and the scene's fingerprint."""
+    from lodprt.store.resume import fingerprint
+
+    ncoef, channels = layout(scene, sh_order)
+    return {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "lodprt_version": _version(),
+            "mode": "full" if threshold_deg is None else "cut", "threshold_deg": threshold_deg, "sh_order": sh_order,
+            "coefficients_per_vertex": ncoef, "channels": channels, "device": device,
+            "ray_offset": ray_offset(scene), "with_hierarchy": bool(hierarchy), "fingerprint": fingerprint(scene),
+            **(gi.attributes() if gi.bounces else {})}
 
 
 def bake(
@@ -232,6 +337,14 @@ def bake(
     tree=None,
     progress: Callable[[int, int], None] | None = None,
     hierarchy_progress: Callable[[int, int], None] | None = None,
+    bounces: int = 0,
+    bounce_threshold: float = 1e-3,
+    gi_rays: int = 64,
+    indirect_threshold_deg: float | None = 10.0,
+    resume: bool = False,
+    add_samples: bool = False,
+    workers: int | None = None,
+    scheduler: str | None = None, compress: str = "none",
 ) -> BakeResult:
     """Bake light samples of ``scene`` and write the store at ``out``.
 
@@ -242,104 +355,166 @@ def bake(
     ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample,
     ``hierarchy_progress(collapses, total)`` while the hierarchy is built.
     Raises StoreError before any work when ``out`` exists and ``overwrite`` is false.
+    ``bounces`` > 0 adds diffuse interreflection (docs/GI.md, ``lodprt.precompute.gi.GISettings`` for the others).
+    ``resume`` continues the killed bake of ``out`` (or finds it finished); ``add_samples`` extends the store at
+    ``out`` to the scene's light grid; ``workers`` (a local dask cluster of that many processes) or ``scheduler``
+    (the address of one) bakes the samples on dask.distributed, ``jobs`` threads per local worker
+    (docs/DISTRIBUTED.md). The store is the same, array for array, whichever way it was made.
     """
+    from lodprt.precompute.gi import GISettings
+
+    gi = GISettings(bounces, bounce_threshold, gi_rays, indirect_threshold_deg)
     device = resolve_device(device)
     if threshold_deg is not None and (not hierarchy or not (threshold_deg >= 0) or not math.isfinite(threshold_deg)):
         raise LodprtError(
             f"threshold_deg {threshold_deg!r}: the light cut needs the hierarchy and a finite threshold >= 0 degrees"
         )
-    writer = StoreWriter(out, overwrite=overwrite) if out is not None else None
-    try:
-        # plan: kernels, device arrays, the scene and the hierarchy
-        load_seconds = load_kernels(device)
-        t0 = time.perf_counter()
-        ids = np.flatnonzero(scene.referenced).astype(np.int32)
-        baker = Baker(scene, sh_order, device, ids)
-        if writer is not None:
-            _write_scene(writer, scene, baker)
-        hierarchy_seconds = None
-        if hierarchy:
-            tree, hierarchy_seconds = _hierarchy(scene, tree, writer, hierarchy_progress)
-        lightcut = None
-        if threshold_deg is not None:
-            from lodprt.precompute.light_cut import LightCut
+    check_sh_order(sh_order)
+    codec = bake_codec(compress, *layout(scene, sh_order), out)
+    cluster = workers is not None or scheduler is not None
+    if (cluster or resume or add_samples) and (out is None or gi.bounces):
+        raise LodprtError("workers, scheduler, resume and add_samples need a store to write (out), and are not yet "
+                          "available with bounces > 0 (their per-sample energy is gathered in-process)")
+    if cluster:
+        from lodprt.precompute.distributed import check_options
 
-            lightcut = LightCut(tree, baker.points, device)
-        # launch: every light sample, written as it finishes
-        samples = _run_samples(scene, baker, ids, lightcut, threshold_deg, jobs, writer, progress)
+        check_options(workers=workers, scheduler=scheduler, threads=jobs)
+    target = None
+    if out is not None:
+        from lodprt.store.resume import BakeTarget
+
+        settings = bake_settings(scene, sh_order, device, threshold_deg, hierarchy, gi)
+        target = BakeTarget(out, overwrite=overwrite, resume=resume, add_samples=add_samples, settings=settings,
+                            lights=scene.lights)
+        if target.finished is not None:  # nothing left to bake
+            return BakeResult(**target.summary())
+    try:
+        # plan: kernels, the scene and the hierarchy (each skipped when a resumed store has it complete)
+        load_seconds = 0.0 if cluster else load_kernels(device)
+        t0 = time.perf_counter()
+        if target is not None and not target.complete("scene"):
+            _write_scene(target.writer, scene, sh_order)
+            target.mark("scene")
+        hierarchy_seconds, built = None, 0.0
+        if hierarchy:
+            stored = target is not None and target.complete("hierarchy")  # read back: its build time is not ours
+            tree, hierarchy_seconds = _hierarchy(scene, tree, target, hierarchy_progress)
+            built = 0.0 if stored else hierarchy_seconds
+        job = SampleJob(scene, tree if threshold_deg is not None else None, sh_order, device, threshold_deg,
+                        None if target is None else str(target.partial.resolve()), gi)
+        # launch: the light samples still to bake, each written as it finishes
+        total = len(job.lights)
+        todo = list(range(total)) if target is None else target.todo()
+        step = None if progress is None else (lambda done, _n: progress(total - len(todo) + done, total))
+        baker = None
+        if cluster:
+            from lodprt.precompute.distributed import run_on_cluster
+
+            infos, load_seconds = run_on_cluster(job, todo, workers=workers, scheduler=scheduler, threads=jobs,
+                                                 progress=step)
+        else:
+            baker, lightcut = job.device_state()
+            infos = _run_samples(job, baker, lightcut, todo, jobs, step)
+        samples = [infos[k] if k in infos else target.recorded(k) for k in range(total)]
         # bake_seconds counts the light samples and the store; the hierarchy reports its own time
-        bake_seconds = time.perf_counter() - t0 - (hierarchy_seconds or 0.0)
+        bake_seconds = time.perf_counter() - t0 - built
+        ncoef, channels = layout(scene, sh_order)
         result = BakeResult(
             path=None if out is None else str(out),
             sh_order=sh_order,
-            coefficients_per_vertex=baker.ncoef,
-            channels=baker.channels,
+            coefficients_per_vertex=ncoef,
+            channels=channels,
             bake_seconds=bake_seconds,
             load_seconds=load_seconds,
             device=device,
             samples=samples,
             hierarchy_seconds=hierarchy_seconds,
+            reused_samples=total - len(todo),
         )
         # write: the root attributes, then the store moves into place
-        if writer is not None:
-            _write_root(writer, scene, baker, result, threshold_deg)
-            writer.commit()
+        if target is not None:
+            extra = {} if baker is None or baker.gi is None else baker.gi.attributes(scene.lights.positions)
+            _write_root(target.writer, scene, result, threshold_deg, ray_offset(scene), extra)
+            target.finish()
+            result.samples = compress_finished(out, codec, result.samples)
         return result
-    except BaseException:
-        if writer is not None:
-            writer.abort()
+    except BaseException as exc:
+        if target is not None and (isinstance(exc, KeyboardInterrupt) or getattr(exc, "resumable", False)):
+            log.warning("%s: interrupted; the finished samples stay in %s for bake --resume", out, target.partial)
+        elif target is not None:
+            target.abort()
         raise
 
 
-def _hierarchy(scene: Scene, tree, writer: StoreWriter | None, progress) -> tuple[object, float]:
-    """The vertex hierarchy (``tree``, or built now) and its build seconds; stored under ``hierarchy/``."""
+def bake_codec(compress: str, ncoef: int, channels: int, out):
+    """The codec of ``bake(compress=...)`` (``lodprt.store.codecs``), checked before any work."""
+    from lodprt.store.codecs import check_layout, parse_codec
+
+    codec = parse_codec(compress, "compress")
+    check_layout(codec, channels, ncoef, "compress")
+    if out is None and not codec.lossless:
+        raise LodprtError(f"compress {codec.name}: needs a store to write (out)")
+    return codec
+
+
+def compress_finished(out, codec, samples: list[dict]) -> list[dict]:
+    """Re-encode the finished store ``out`` in place with ``codec`` (none: leave it); the samples' statistics, with
+    the encoded ``bytes``. Killed meanwhile, the finished float32 store stays at ``out`` (docs/FORMAT.md)."""
+    if codec.lossless:
+        return samples
+    from lodprt.store.compress import compress_store
+
+    return compress_store(out, out, codec, overwrite=True, option="compress")["samples"]
+
+
+def check_sh_order(sh_order: int) -> None:
+    """Refuse an SH order the float32 kernels do not cover."""
+    from lodprt.kernels import sh as ksh
+
+    if not 1 <= sh_order <= ksh.MAX_KERNEL_ORDER:
+        raise LodprtError(f"sh_order {sh_order}: must be >= 1; the float32 kernels go up to order {ksh.MAX_KERNEL_ORDER}")
+
+
+def _hierarchy(scene: Scene, tree, target, progress) -> tuple[object, float]:
+    """The vertex hierarchy (the complete one of a resumed or extended store, ``tree``, or built now) and its build
+    seconds; stored under ``hierarchy/`` (completion mark last)."""
     from lodprt.model.hierarchy_build import build_hierarchy
 
+    if target is not None and target.complete("hierarchy"):
+        return target.hierarchy()
     t_h = time.perf_counter()
     if tree is None:
         tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=progress)
     seconds = time.perf_counter() - t_h
-    if writer is not None:
+    if target is not None:
+        writer = target.writer
         for name, arr in tree.to_arrays().items():
             writer.array(f"hierarchy/{name}", arr, chunk_rows=1 << 18)
         writer.attrs("hierarchy", levels=tree.levels, seconds=seconds, roots=int(len(tree.roots)), depth=tree.depth)
+        target.mark("hierarchy")
     return tree, seconds
 
 
-def _run_samples(scene: Scene, baker: Baker, ids: np.ndarray, lightcut, threshold_deg, jobs: int | None,
-                 writer: StoreWriter | None, progress) -> list[dict]:
-    """Bake every light sample on ``jobs`` threads (default: every core on the CPU, 1 on CUDA), full resolution or
-    on its light cut; record each as it finishes. Returns the per-sample statistics in sample order."""
-    lights = scene.lights.positions
+def _run_samples(job: SampleJob, baker: Baker, lightcut, todo: list[int], jobs: int | None, progress) -> dict:
+    """Bake the light samples ``todo`` on ``jobs`` threads (default: every core on the CPU, 1 on CUDA), full
+    resolution or on their light cuts; record each as it finishes. Returns their statistics by sample."""
     if jobs is None:
         jobs = (os.cpu_count() or 1) if baker.device == "cpu" else 1
-    jobs = max(1, min(jobs, len(lights)))
-    samples: list[dict] = [{} for _ in lights]
-
-    def run(k: int):
-        t = time.perf_counter()
-        extra = {}
-        if lightcut is None:
-            coeffs, visible = baker.sample(lights[k])
-            kept = ids
-        else:
-            kept, nodes, dark, coeffs, visible = baker.sample_cut(lights[k], lightcut, threshold_deg)
-            extra = {"cut_nodes": nodes, "dark": dark}
-        return k, kept, extra, coeffs, visible, time.perf_counter() - t
-
+    jobs = max(1, min(jobs, len(todo) or 1))
+    samples: dict[int, dict] = {}
     with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(run, k) for k in range(len(lights))]
+        futures = [pool.submit(job.compute, baker, lightcut, k) for k in todo]
         for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
-            k, kept, extra, coeffs, visible, seconds = fut.result()
-            _check_finite(scene, k, lights[k], coeffs)
-            samples[k] = _record(writer, k, kept, extra, coeffs, visible, seconds)
+            k, *rest = fut.result()
+            samples[k] = job.write(k, *rest)
             if progress is not None:
-                progress(done, len(lights))
+                progress(done, len(todo))
     return samples
 
 
-def _write_root(writer: StoreWriter, scene: Scene, baker: Baker, result: BakeResult, threshold_deg) -> None:
-    """The store's root attributes (docs/FORMAT.md)."""
+def _write_root(writer: StoreWriter, scene: Scene, result: BakeResult, threshold_deg, offset: float,
+                extra: dict) -> None:
+    """The store's root attributes (docs/FORMAT.md); ``extra``: those of the interreflection settings."""
     writer.attrs(
         format=FORMAT_NAME,
         format_version=FORMAT_VERSION,
@@ -347,14 +522,15 @@ def _write_root(writer: StoreWriter, scene: Scene, baker: Baker, result: BakeRes
         mode="full" if threshold_deg is None else "cut",
         threshold_deg=threshold_deg,
         sh_order=result.sh_order,
-        coefficients_per_vertex=baker.ncoef,
-        channels=baker.channels,
+        coefficients_per_vertex=result.coefficients_per_vertex,
+        channels=result.channels,
         bake_seconds=result.bake_seconds,
         load_seconds=result.load_seconds,
         device=result.device,
         source=scene.source,
-        ray_offset=baker.offset,
+        ray_offset=offset,
         hierarchy_seconds=result.hierarchy_seconds,
+        **extra,
     )
 
 
@@ -396,14 +572,14 @@ def _version() -> str:
     return __version__
 
 
-def _write_scene(writer: StoreWriter, scene: Scene, baker: Baker) -> None:
+def _write_scene(writer: StoreWriter, scene: Scene, sh_order: int) -> None:
     writer.array("scene/positions", scene.positions.astype(np.float32), chunk_rows=1 << 18)
     writer.array("scene/normals", scene.normals.astype(np.float32), chunk_rows=1 << 18)
     writer.array("scene/faces", scene.faces.astype(np.int32), chunk_rows=1 << 18)
     writer.array("scene/material_id", scene.material_id.astype(np.int32), chunk_rows=1 << 18)
     writer.array("scene/object_id", scene.object_id.astype(np.int32), chunk_rows=1 << 18)
     writer.attrs("scene", object_names=list(scene.object_names))
-    tables = material_tables(scene, baker.sh_order, 3)
+    tables = material_tables(scene, sh_order, 3)
     writer.array("materials/kd", tables["kd"])
     writer.array("materials/ks", tables["ks"])
     writer.array("materials/shininess", tables["shininess"])

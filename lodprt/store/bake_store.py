@@ -25,6 +25,8 @@ log = logging.getLogger(__name__)
 
 FORMAT_NAME = "lodprt"
 FORMAT_VERSION = 1
+#: versions ``Store`` reads: 1 (float32 samples) and 2 (samples encoded by a codec, ``lodprt.store.codecs``)
+READ_VERSIONS = (1, 2)
 #: the ``format`` of an environment transfer store (``lodprt.store.transfer_store``)
 TRANSFER_FORMAT = "lodprt-transfer"
 #: the ``format`` of a volume transfer store and of a neighbourhood transfer store (``lodprt.store.volume_store``,
@@ -354,8 +356,11 @@ class Store:
         self.root = zarr.open_group(str(self.path), mode="r")
         self.attrs = dict(self.root.attrs)
         version = self.attrs.get("format_version")
-        if version != FORMAT_VERSION:
-            raise StoreError(f"{self.path}: format_version {version!r}; this lodprt reads version {FORMAT_VERSION}")
+        if version not in READ_VERSIONS:
+            raise StoreError(f"{self.path}: format_version {version!r}; this lodprt reads versions "
+                             f"{', '.join(map(str, READ_VERSIONS))}")
+        #: the codec of the light samples ("none" in version 1; docs/FORMAT.md "Compressed bake store")
+        self.codec = str(self.attrs.get("codec", "none")) if version == 2 else "none"
         self._cache: dict[str, np.ndarray] = {}
 
     def read(self, name: str) -> np.ndarray:
@@ -390,6 +395,8 @@ class Store:
     @property
     def coefficients_per_vertex(self) -> int:
         """SH coefficients stored per vertex and channel, read off the arrays: 1 (diffuse-only) or sh_order^2."""
+        if self.codec != "none":
+            return int(self.attrs["coefficients_per_vertex"])
         return int(self.root[f"{sample_group(0)}/coefficients"].shape[-1])
 
     @property
@@ -414,7 +421,22 @@ class Store:
     def sample(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Vertex ids (K,) int32 and coefficients (K, C, ncoef) float32 of light sample ``k``."""
         g = sample_group(self.check_sample(k))
+        if self.codec != "none":  # version 2: decoded afresh each call (lodprt.store.codecs, C-1..C-4)
+            from lodprt.store.codecs import read_sample
+
+            return read_sample(self, k)[:2]
         return self.read(f"{g}/vertex_ids"), self.read(f"{g}/coefficients")
+
+    def cut_arrays(self, k: int) -> dict:
+        """{"cut_nodes", "dark"} of sample ``k`` of a light-cut store (decoded in version 2), {} in full mode."""
+        g = sample_group(self.check_sample(k))
+        if self.codec != "none":
+            from lodprt.store.codecs import read_cut
+
+            return read_cut(self, k)
+        if f"{g}/cut_nodes" in self.root:
+            return {"cut_nodes": self.read(f"{g}/cut_nodes"), "dark": self.read(f"{g}/dark")}
+        return {}
 
     def sample_info(self, k: int) -> dict:
         g = self.root[sample_group(self.check_sample(k))]
@@ -451,10 +473,7 @@ class Store:
         kept = np.zeros(self.num_vertices, bool)
         kept[ids] = True
         if (referenced & ~kept).any():
-            g = sample_group(sample)
-            cut = {}
-            if f"{g}/cut_nodes" in self.root:
-                cut = {"cut_nodes": self.read(f"{g}/cut_nodes"), "dark": self.read(f"{g}/dark")}
+            cut = self.cut_arrays(sample)
             out = self.completion_plan().complete(ids, coeffs.astype(np.float64), self.num_vertices, **cut)
         else:
             out = np.zeros((self.num_vertices,) + coeffs.shape[1:], np.float64)
@@ -549,7 +568,9 @@ class Store:
             out["hierarchy_nodes"] = out["hierarchy_roots"] = out["hierarchy_depth"] = out["hierarchy_seconds"] = None
         out["bytes_total"] = int(sum(s["bytes"] for s in samples))
         out["bytes_on_disk"] = int(sum(f.stat().st_size for f in self.path.rglob("*") if f.is_file()))
-        return out
+        from lodprt.store.codecs import codec_summary  # version 2: codec, store-level bytes, version-1 payload
+
+        return {**out, **codec_summary(self)}
 
 
 def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:

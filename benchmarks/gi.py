@@ -1,0 +1,297 @@
+"""Interreflection in the point-light bake: LOD GI bake against the full-resolution GI bake, and against Mitsuba 3.
+
+    python benchmarks/gi.py [--quick] [--mitsuba] [--json PATH] [--device cpu|cuda]
+
+Scene: the shared Stanford bunny on a floor, both diffuse white (kd 0.8, ks 0). For each bounce count 0..3 and
+gathering ray count, in the same run: the full-resolution GI bake and the LOD GI bake (light cut --threshold-deg
+plus the indirect cut --indirect-threshold-deg), their bake times (ratio), and the rel-RMSE of their completed
+per-vertex radiance against a converged reference (full resolution, many rays, the same bounce count) and against
+each other. ``--mitsuba`` also renders one light sample with lodprt's renderer and with Mitsuba 3's ``path``
+integrator (same geometry, point light, camera; ``pip install 'lodprt[reference]'``) and reports PSNR and the mean
+radiance inside the direct shadows. Writes benchmarks/results/gi[-quick].json, .png and gi-mitsuba[-quick].png.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import MODELS, environment, parser, plot_path, table, write
+
+KD = 0.8
+#: the light of the Mitsuba comparison and the camera (scene units of the bunny, about 0.15 across)
+MITSUBA_LIGHT = (0.09, 0.30, 0.12)
+EYE, TARGET, FOV = (-0.05, 0.16, 0.32), (-0.02, 0.07, 0.0), 40.0
+
+
+def gi_scene(floor_res: int, grid, box=None):
+    from lodprt.model.scene import Material, assemble_scene, load_mesh
+
+    path = MODELS / "stanford-bunny.obj"
+    if not path.is_file():
+        sys.exit(f"benchmark needs {path} (the shared test meshes)")
+    pos, faces = load_mesh(path)
+    white = Material((KD, KD, KD), 0.0, 1.0)
+    lights = {"grid": list(grid)} if box is None else {"grid": list(grid), "box": list(box)}
+    return assemble_scene([("bunny", pos, faces, white)], (floor_res, 1.0, white), lights, "lights",
+                          f"stanford-bunny + {floor_res}x{floor_res} floor, diffuse kd {KD}")
+
+
+def completed(path: Path, referenced: np.ndarray) -> np.ndarray:
+    """(S, V') completed y_0 coefficient of every referenced vertex of every sample of the store at ``path``."""
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(path)
+    return np.stack([store.coefficients(k)[referenced, 0, 0] for k in range(store.num_samples)])
+
+
+def rel_rmse(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2)))
+
+
+def reference(scene, rays: int, bounces: int, device: str) -> list[np.ndarray]:
+    """Converged references: per bounce count 0..bounces, (S, V') y_0 of the full-resolution GI radiance."""
+    from lodprt.precompute.bake import Baker, load_kernels
+    from lodprt.precompute.gi import GISettings, attach, constant_coefficient
+
+    load_kernels(device)
+    baker = Baker(scene, 2, device, np.flatnonzero(scene.referenced).astype(np.int32))
+    gi = attach(baker, scene, GISettings(bounces=bounces, threshold=0.0, rays=rays, seed=12345))
+    per_light = [np.cumsum(gi.pass_radiance(light), axis=0)[:, scene.referenced, 0] for light in scene.lights.positions]
+    return [constant_coefficient() * np.stack([p[min(b, len(p) - 1)] for p in per_light]) for b in range(bounces + 1)]
+
+
+def sweep(scene, tree, args, tmp: Path) -> list[dict]:
+    from lodprt.precompute.bake import bake
+
+    ref_b = reference(scene, args.reference_rays, max(args.bounces), args.device)
+    rows = []
+    for b in args.bounces:
+        for rays in (args.rays if b else args.rays[:1]):
+            common = dict(sh_order=2, device=args.device, tree=tree, bounces=b, gi_rays=rays)
+            full = bake(scene, tmp / "full.zarr", threshold_deg=None, overwrite=True, **common)
+            lod = bake(scene, tmp / "lod.zarr", threshold_deg=args.threshold_deg, overwrite=True,
+                       indirect_threshold_deg=args.indirect_threshold_deg, **common)
+            cf, cl = completed(tmp / "full.zarr", scene.referenced), completed(tmp / "lod.zarr", scene.referenced)
+            import zarr
+
+            gathered = zarr.open_group(str(tmp / "lod.zarr"), mode="r").attrs.get("indirect_gather_vertices")
+            rows.append({"bounces": b, "rays": rays, "full_s": full.bake_seconds, "lod_s": lod.bake_seconds,
+                         "ratio": lod.bake_seconds / full.bake_seconds,
+                         "kept": float(np.mean([s["vertices_kept"] for s in lod.samples])),
+                         "gathered": gathered if b else 0,
+                         "full_err": rel_rmse(cf, ref_b[b]), "lod_err": rel_rmse(cl, ref_b[b]),
+                         "lod_vs_full": rel_rmse(cl, cf)})
+            r = rows[-1]
+            print(f"  bounces {b} rays {rays}: full {r['full_s']:.2f} s, LOD {r['lod_s']:.2f} s ({r['ratio']:.3f}), "
+                  f"errors {r['full_err']:.4f} / {r['lod_err']:.4f}, LOD vs full {r['lod_vs_full']:.4f}", flush=True)
+    return rows
+
+
+# -- Mitsuba 3 --------------------------------------------------------------------------------------------------
+
+
+def require_mitsuba():
+    try:
+        import mitsuba as mi
+    except ImportError:
+        sys.exit("benchmarks/gi.py --mitsuba needs Mitsuba 3: pip install 'lodprt[reference]' (or pip install "
+                 "'mitsuba>=3.5'); the variant scalar_rgb runs on the CPU")
+    mi.set_variant("scalar_rgb")
+    return mi
+
+
+def mitsuba_image(scene, light, intensity, bounces: int, size, spp: int, tmp: Path) -> np.ndarray:
+    """Linear RGB (H, W, 3) of ``scene`` by Mitsuba's path tracer: Lambert kd, a point light of intensity pi I
+    (lodprt's ``kd I cos / d^2`` is ``(kd / pi) (pi I) cos / d^2``), max_depth = bounces + 2, the same camera."""
+    mi = require_mitsuba()
+    import trimesh
+
+    shapes = {}
+    for k, name in enumerate(scene.object_names):
+        sel = scene.object_id == k
+        remap = np.cumsum(sel) - 1
+        faces = scene.faces[sel[scene.faces[:, 0]]]
+        mesh = trimesh.Trimesh(scene.positions[sel], remap[faces], vertex_normals=scene.normals[sel], process=False)
+        ply = tmp / f"{name}.ply"
+        mesh.export(ply, vertex_normal=True)
+        kd = scene.materials[scene.material_id[np.flatnonzero(sel)[0]]].kd
+        shapes[name] = {"type": "ply", "filename": str(ply), "face_normals": False,
+                        "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(kd)}}}
+    w, h = size
+    sensor = {"type": "perspective", "fov": FOV, "fov_axis": "y", "near_clip": 1e-3, "far_clip": 100.0,
+              "to_world": mi.ScalarTransform4f().look_at(origin=list(EYE), target=list(TARGET), up=[0, 1, 0]),
+              "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+              "sampler": {"type": "independent", "sample_count": spp}}
+    desc = {"type": "scene", "integrator": {"type": "path", "max_depth": bounces + 2, "hide_emitters": True},
+            "sensor": sensor, "light": {"type": "point", "position": list(map(float, light)),
+                                        "intensity": {"type": "rgb", "value": [math.pi * c for c in intensity]}}}
+    desc.update(shapes)
+    img = mi.render(mi.load_dict(desc))
+    return np.asarray(img, np.float64)[:, :, :3]
+
+
+def lodprt_image(store_path: Path, size, supersample: int = 4) -> np.ndarray:
+    """Linear RGB (H, W, 3) of sample 0 by lodprt's renderer, ``supersample``^2 pixels averaged per pixel (as the
+    path tracer's box filter averages over the pixel)."""
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.camera import Camera
+    from lodprt.runtime.frames import full_frame
+    from lodprt.store.bake_store import open_store
+
+    w, h = size
+    cam = Camera(eye=EYE, target=TARGET, fov=FOV, width=w * supersample, height=h * supersample)
+    store = open_store(store_path)
+    with Renderer() as r:
+        img = r.image(full_frame(store, cam, sample=0), camera=cam, linear=True, light_markers=False).astype(np.float64)
+    return img.reshape(h, supersample, w, supersample, 3).mean((1, 3))
+
+
+def psnr(a: np.ndarray, b: np.ndarray, white: float, mask=None) -> float:
+    """PSNR of display values clip(L / white, 0, 1); ``mask`` restricts it to some pixels."""
+    x, y = np.clip(a / white, 0, 1), np.clip(b / white, 0, 1)
+    if mask is not None:
+        x, y = x[mask], y[mask]
+    return float(10 * np.log10(1.0 / max(np.mean((x - y) ** 2), 1e-20)))
+
+
+def mitsuba_check(args, tmp: Path) -> dict:
+    """The done-when comparison: bunny + floor, 2 bounces, one light, against Mitsuba's path tracer."""
+    from lodprt.model.hierarchy_build import build_hierarchy
+    from lodprt.precompute.bake import bake
+
+    require_mitsuba()
+    eps = 1e-4
+    box = [c - eps for c in MITSUBA_LIGHT] + [c + eps for c in MITSUBA_LIGHT]
+    scene = gi_scene(args.mitsuba_floor, (1, 1, 1), box)
+    tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
+    size, B = tuple(args.mitsuba_size), 2
+    out = {"scene": scene.source, "vertices": int(scene.referenced.sum()), "size": list(size), "spp": args.spp,
+           "eye": EYE, "target": TARGET, "fov": FOV, "light": MITSUBA_LIGHT}
+    images = {}
+    for label, b, thr in [("direct", 0, None), ("gi_full", B, None), ("gi_lod", B, args.threshold_deg)]:
+        t = time.perf_counter()
+        res = bake(scene, tmp / f"{label}.zarr", sh_order=2, device=args.device, tree=tree, bounces=b,
+                   gi_rays=args.mitsuba_rays, threshold_deg=thr, indirect_threshold_deg=args.indirect_threshold_deg,
+                   overwrite=True)
+        out[f"{label}_bake_s"] = res.bake_seconds
+        images[label] = lodprt_image(tmp / f"{label}.zarr", size)
+        print(f"  lodprt {label}: bake {res.bake_seconds:.1f} s, rendered in {time.perf_counter() - t:.1f} s", flush=True)
+    t = time.perf_counter()
+    ref = mitsuba_image(scene, MITSUBA_LIGHT, scene.lights.intensity, B, size, args.spp, tmp)
+    out["mitsuba_s"] = time.perf_counter() - t
+    # direct light from a point light is noise-free but for the pixel filter: few samples find the shadows
+    direct_ref = mitsuba_image(scene, MITSUBA_LIGHT, scene.lights.intensity, 0, size, 16, tmp)
+    white = float(np.percentile(ref[ref.max(2) > 0], 99.5))
+    fg = ref.max(2) > 0
+    shadow = fg & (images["direct"].max(2) <= 0) & (direct_ref.max(2) <= 1e-3 * white)  # both say: direct shadow
+    out.update(white=white, shadow_pixels=int(shadow.sum()), foreground_pixels=int(fg.sum()))
+    for label, img in images.items():
+        out[f"{label}_psnr"] = psnr(img, ref, white)
+        out[f"{label}_psnr_foreground"] = psnr(img, ref, white, fg)
+        m, r = img[shadow].mean(), ref[shadow].mean()
+        out[f"{label}_shadow_mean_rel"] = float(m / r - 1) if r > 0 else float("nan")
+    out["mitsuba_direct_vs_lodprt_direct_psnr"] = psnr(images["direct"], direct_ref, white)
+    _mitsuba_figure(images, ref, white, shadow, out, "gi-mitsuba" + ("-quick" if args.quick else ""))
+    return out
+
+
+def _mitsuba_figure(images, ref, white, shadow, out, name: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [("Mitsuba 3 path, max_depth 4", ref), ("lodprt direct only", images["direct"]),
+              ("lodprt 2 bounces, full", images["gi_full"]), ("lodprt 2 bounces, LOD", images["gi_lod"])]
+    fig, axes = plt.subplots(1, 5, figsize=(17, 3.4))
+    for ax, (title, img) in zip(axes, panels):
+        ax.imshow(np.clip(img / white, 0, 1) ** (1 / 2.2))
+        key = {"lodprt direct only": "direct", "lodprt 2 bounces, full": "gi_full", "lodprt 2 bounces, LOD": "gi_lod"}
+        sub = f"\n{out[key[title] + '_psnr']:.1f} dB" if title in key else ""
+        ax.set_title(title + sub, fontsize=9)
+        ax.axis("off")
+    axes[4].imshow(shadow, cmap="gray")
+    axes[4].set_title("direct-shadow pixels", fontsize=9)
+    axes[4].axis("off")
+    fig.tight_layout()
+    fig.savefig(plot_path(name), dpi=110)
+    print("wrote", plot_path(name))
+
+
+def plot(rows, name: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for b in sorted({r["bounces"] for r in rows}):
+        sel = [r for r in rows if r["bounces"] == b]
+        ax.plot([r["full_s"] for r in sel], [r["full_err"] for r in sel], "o-", color=f"C{b}", label=f"{b} bounces, full")
+        ax.plot([r["lod_s"] for r in sel], [r["lod_err"] for r in sel], "s--", color=f"C{b}", label=f"{b} bounces, LOD")
+        for r in sel:
+            ax.annotate(f"{r['rays']}", (r["lod_s"], r["lod_err"]), fontsize=7)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("bake seconds (light samples; labels: rays per vertex)")
+    ax.set_ylabel("rel-RMSE of completed radiance vs converged reference")
+    ax.set_title("GI bake: error against time")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(plot_path(name), dpi=120)
+    print("wrote", plot_path(name))
+
+
+def main():
+    p = parser(__doc__.splitlines()[0])
+    p.add_argument("--mitsuba", action="store_true", help="also compare one light sample with Mitsuba 3's path tracer")
+    p.add_argument("--threshold-deg", type=float, default=0.0, help="light cut of the LOD bakes (default 0: the direct "
+                   "term costs one shadow ray per vertex; the LOD saves on the indirect passes)")
+    p.add_argument("--indirect-threshold-deg", type=float, default=20.0, help="indirect cut (default 20)")
+    args = p.parse_args()
+    from lodprt.devices import resolve_device
+    from lodprt.model.hierarchy_build import build_hierarchy
+
+    args.device = resolve_device(args.device)
+    q = args.quick
+    args.bounces = [0, 1, 2, 3]
+    args.rays = [16] if q else [32, 128]
+    args.reference_rays = 64 if q else 256
+    args.mitsuba_floor, args.mitsuba_rays = (40, 32) if q else (120, 128)
+    args.mitsuba_size, args.spp = ((160, 120), 16) if q else ((320, 240), 512)
+    scene = gi_scene(20 if q else 60, (1, 1, 1) if q else (2, 1, 2))
+    t = time.perf_counter()
+    tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
+    print(f"{scene.source}: {int(scene.referenced.sum()):,} vertices, {len(scene.lights.positions)} light samples, "
+          f"hierarchy {time.perf_counter() - t:.1f} s, device {args.device}", flush=True)
+    tmp = Path(tempfile.mkdtemp(prefix="lodprt-gi-"))
+    try:
+        rows = sweep(scene, tree, args, tmp)
+        mitsuba = mitsuba_check(args, tmp) if args.mitsuba else None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print(table(rows, [("bounces", "bounces", "d"), ("rays", "rays", "d"), ("full_s", "full s", ".2f"),
+                       ("lod_s", "LOD s", ".2f"), ("ratio", "LOD/full", ".3f"), ("kept", "kept/sample", ",.0f"),
+                       ("gathered", "gathered", ",d"), ("full_err", "full err", ".4f"), ("lod_err", "LOD err", ".4f"),
+                       ("lod_vs_full", "LOD vs full", ".4f")]))
+    if mitsuba:
+        for k, v in mitsuba.items():
+            print(f"  mitsuba {k}: {v}")
+    name = "gi" + ("-quick" if q else "")
+    results = {"benchmark": "gi", "quick": q, "scene": scene.source, "environment": environment(args.device),
+               "settings": {"threshold_deg": args.threshold_deg, "indirect_threshold_deg": args.indirect_threshold_deg,
+                            "reference_rays": args.reference_rays, "kd": KD},
+               "rows": rows, "mitsuba": mitsuba}
+    print("wrote", write(name, results, args.json))
+    plot(rows, name)
+
+
+if __name__ == "__main__":
+    main()
