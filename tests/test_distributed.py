@@ -128,3 +128,26 @@ def test_existing_scheduler_keeps_one_device_state_per_worker(tmp_path):
     assert len(made) == 1 and res.reused_samples == 0  # thread workers share this process: one state, 6 tasks
     with pytest.raises(LodprtError, match="give either --workers N"):
         api_bake(toml, tmp_path / "x.zarr", workers=2, scheduler="tcp://127.0.0.1:1")
+
+
+def test_interreflection_on_a_cluster_and_resumed(tmp_path):
+    """bounces > 0 with scheduler= (two thread workers) and with a resumed bake: each sample's group records its
+    pass energies, so both give the in-process store byte for byte (root bounce_energy included)."""
+    import zarr
+
+    toml = scene_file(tmp_path, grid=(4, 1, 1))
+    gi = {"bounces": 1, "gi_rays": 8}
+    ref = tmp_path / "ref.zarr"
+    api_bake(toml, ref, **gi)
+    out = tmp_path / "out.zarr"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster:
+        api_bake(toml, out, scheduler=cluster.scheduler_address, **gi)
+    assert_same_store(ref, out)
+    energy = zarr.open_group(str(out), mode="r").attrs["bounce_energy"]
+    assert len(energy) == 4 and all(len(e) == 2 and e[1] > 0 for e in energy)
+    resumed = tmp_path / "resumed.zarr"  # a CLI bake killed with SIGKILL after its first samples, then resumed
+    cmd = lodprt("bake", toml, "-o", resumed, *FAST, "--bounces", "1", "--gi-rays", "8", "--jobs", "1")
+    kill_at(cmd, tmp_path / "resumed.zarr.partial-*", lambda folder: len(complete_samples(folder, 4)) >= 1)
+    res = api_bake(toml, resumed, resume=True, **gi)
+    assert 1 <= res.reused_samples < 4
+    assert_same_store(ref, resumed)

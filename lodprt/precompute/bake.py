@@ -264,7 +264,8 @@ class SampleJob:
         return baker, lightcut
 
     def compute(self, baker: Baker, lightcut, k: int):
-        """Bake light sample ``k``: (k, vertex ids, cut arrays, coefficients, visibility, seconds)."""
+        """Bake light sample ``k``: (k, vertex ids, cut arrays, coefficients, visibility, seconds, statistics of the
+        interreflection passes: each pass' mean radiance, recorded with the sample)."""
         t = time.perf_counter()
         extra = {}
         if lightcut is None:
@@ -273,18 +274,19 @@ class SampleJob:
         else:
             kept, nodes, dark, coeffs, visible = baker.sample_cut(self.lights[k], lightcut, self.threshold_deg)
             extra = {"cut_nodes": nodes, "dark": dark}
-        return k, kept, extra, coeffs, visible, time.perf_counter() - t
+        stats = {} if baker.gi is None else baker.gi.sample_attributes(self.lights[k])
+        return k, kept, extra, coeffs, visible, time.perf_counter() - t, stats
 
-    def write(self, k: int, kept, extra: dict, coeffs, visible, seconds: float) -> dict:
+    def write(self, k: int, kept, extra: dict, coeffs, visible, seconds: float, stats: dict | None = None) -> dict:
         """Check and record sample ``k``: its group (completion mark last) moves into the store whole."""
         from lodprt.store.sample_groups import SampleGroupWriter
 
         _check_finite(self.scene, k, self.lights[k], coeffs)
         if self.partial is None:
-            return _record(None, k, kept, extra, coeffs, visible, seconds)
+            return _record(None, k, kept, extra, coeffs, visible, seconds, stats)
         group = SampleGroupWriter(self.partial, k)
         try:
-            info = _record(group, k, kept, extra, coeffs, visible, seconds)
+            info = _record(group, k, kept, extra, coeffs, visible, seconds, stats)
             group.finish()
         except BaseException:
             group.abort()
@@ -361,7 +363,7 @@ def bake(
     (the address of one) bakes the samples on dask.distributed, ``jobs`` threads per local worker
     (docs/DISTRIBUTED.md). The store is the same, array for array, whichever way it was made.
     """
-    from lodprt.precompute.gi import GISettings
+    from lodprt.precompute.gi import GISettings, gi_attributes
 
     gi = GISettings(bounces, bounce_threshold, gi_rays, indirect_threshold_deg)
     device = resolve_device(device)
@@ -372,9 +374,8 @@ def bake(
     check_sh_order(sh_order)
     codec = bake_codec(compress, *layout(scene, sh_order), out)
     cluster = workers is not None or scheduler is not None
-    if (cluster or resume or add_samples) and (out is None or gi.bounces):
-        raise LodprtError("workers, scheduler, resume and add_samples need a store to write (out), and are not yet "
-                          "available with bounces > 0 (their per-sample energy is gathered in-process)")
+    if (cluster or resume or add_samples) and out is None:
+        raise LodprtError("workers, scheduler, resume and add_samples need a store to write (out)")
     if cluster:
         from lodprt.precompute.distributed import check_options
 
@@ -433,7 +434,7 @@ def bake(
         )
         # write: the root attributes, then the store moves into place
         if target is not None:
-            extra = {} if baker is None or baker.gi is None else baker.gi.attributes(scene.lights.positions)
+            extra = {} if not gi.bounces else gi_attributes(gi, result.samples)
             _write_root(target.writer, scene, result, threshold_deg, ray_offset(scene), extra)
             target.finish()
             result.samples = compress_finished(out, codec, result.samples)
@@ -534,10 +535,12 @@ def _write_root(writer: StoreWriter, scene: Scene, result: BakeResult, threshold
     )
 
 
-def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visible, seconds: float) -> dict:
-    """Write light sample ``k`` (when there is a store) and return its statistics."""
+def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visible, seconds: float,
+            stats: dict | None = None) -> dict:
+    """Write light sample ``k`` (when there is a store) and return its statistics (with ``stats``)."""
     counts = np.bincount(visible, minlength=4)
     info = {
+        **(stats or {}),
         "vertices_kept": int(len(kept)),
         "bytes": int(kept.nbytes + coeffs.nbytes + sum(a.nbytes for a in extra.values())),
         "seconds": float(seconds),

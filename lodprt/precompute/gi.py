@@ -194,10 +194,12 @@ class Interreflection:
         with self._lock:
             self.energy[tuple(float(x) for x in light)] = energies
 
-    def attributes(self, lights: np.ndarray) -> dict:
-        """Root attributes of the store: the settings and, per light sample, each pass' mean radiance."""
-        energy = [self.energy.get(tuple(float(x) for x in light), []) for light in lights]
-        return {**self.settings.attributes(), "bounce_energy": energy,
+    def sample_attributes(self, light) -> dict:
+        """What a light sample's group records of its interreflection: each pass' mean radiance (bounce 0 first)
+        and the vertices the indirect cut gathers at (``gi_attributes`` assembles the root's from them, so a
+        sample baked on a dask worker or in an earlier, resumed run counts the same)."""
+        energy = self.energy.get(tuple(float(x) for x in light), [])
+        return {"bounce_energy": [float(e) for e in energy],
                 "indirect_gather_vertices": None if self.cut_state is None else int(len(self.cut_state.gather_ids))}
 
     def pass_radiance(self, light) -> list[np.ndarray]:
@@ -367,3 +369,12 @@ def indirect_cut(h, inverse: np.ndarray, threshold_deg: float | None, levels) ->
             ok[nodes] = ok[c0] & ok[c1] & (spread <= eps)
     parent_ok = np.where(h.parent >= 0, ok[np.maximum(h.parent, 0)], False)
     return np.flatnonzero(ok & ~parent_ok).astype(np.int32)
+
+
+def gi_attributes(settings, samples: list[dict]) -> dict:
+    """Root attributes of a store baked with bounces: the settings, each sample's pass energies (from the
+    statistics its group records) and the vertices the indirect cut gathers at."""
+    gather = next((s["indirect_gather_vertices"] for s in samples if s.get("indirect_gather_vertices") is not None),
+                  None)
+    return {**settings.attributes(), "bounce_energy": [list(s.get("bounce_energy", [])) for s in samples],
+            "indirect_gather_vertices": gather}
