@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from lodprt.errors import StoreError
-from lodprt.store.bake_store import (FORMAT_NAME, FORMAT_VERSION, OWNER_FILE, StoreWriter, clean_leftovers, open_store,
-                          process_identity, writer_alive)
+from lodprt.store.bake_store import FORMAT_VERSION, open_store
+from lodprt.store.writer import FORMAT_NAME, OWNER_FILE, StoreWriter, clean_leftovers, process_identity, writer_alive
 
 REPO = Path(__file__).resolve().parents[1]
 SPOT = REPO.parent / "shared" / "models" / "spot.obj"
@@ -69,7 +69,7 @@ def test_dead_partial_removed_live_partial_kept(tmp_path, caplog):
     live_proc = sleeper()
     try:
         live = leftover(dest, process_identity(live_proc.pid))
-        with caplog.at_level(logging.INFO, logger="lodprt.store.bake_store"):
+        with caplog.at_level(logging.INFO, logger="lodprt.store"):
             write_store(dest)
         assert not dead.exists() and live.is_dir() and (live / OWNER_FILE).is_file()
         assert open_store(dest).positions.shape == (4, 3)
@@ -97,7 +97,7 @@ def test_pid_reuse_other_hosts_and_foreign_folders(tmp_path, caplog):
     (mine / "thesis.tex").write_text("precious")
     empty = dest.with_name(f"{dest.name}.partial-{gone['pid'] + 3_000_000}")  # killed before its owner record
     empty.mkdir()
-    with caplog.at_level(logging.INFO, logger="lodprt.store.bake_store"):
+    with caplog.at_level(logging.INFO, logger="lodprt.store"):
         actions = clean_leftovers(dest)
     removed = ((legacy, gone["pid"] + 1_000_000), (empty, gone["pid"] + 3_000_000))
     assert sorted(actions) == sorted(f"{f}: removed, left by an interrupted bake (pid {pid}, no longer running)"

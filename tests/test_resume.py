@@ -16,7 +16,8 @@ import pytest
 from lodprt.errors import LodprtError, StoreError
 from lodprt.model.scene import load_scene
 from lodprt.precompute.bake import bake
-from lodprt.store.bake_store import OWNER_FILE, open_store, process_identity
+from lodprt.store.bake_store import open_store
+from lodprt.store.writer import OWNER_FILE, process_identity
 from lodprt.store.resume import TIMINGS
 from lodprt.store.sample_groups import SampleGroupWriter, complete_samples, is_complete, tidy
 

@@ -28,7 +28,8 @@ from lodprt.errors import LodprtError
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model import sh
 from lodprt.model.scene import Scene
-from lodprt.store.bake_store import FORMAT_NAME, FORMAT_VERSION, StoreWriter, sample_group
+from lodprt.store.bake_store import FORMAT_VERSION, sample_group
+from lodprt.store.writer import FORMAT_NAME, StoreWriter
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.store import codecs
-from lodprt.store.bake_store import FORMAT_VERSION, Store, StoreWriter, open_store, sample_group
+from lodprt.store.bake_store import FORMAT_VERSION, Store, open_store, sample_group
+from lodprt.store.writer import StoreWriter
 
 log = logging.getLogger(__name__)
 

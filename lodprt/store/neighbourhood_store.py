@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
-from lodprt.store.bake_store import NEIGHBOURHOOD_FORMAT, StoreWriter, prepare_destination, store_format
+from lodprt.store.writer import NEIGHBOURHOOD_FORMAT, StoreWriter, prepare_destination, store_format
 
 NEIGHBOURHOOD_FORMAT_VERSION = 1
 WHAT = "lodprt neighbourhood store"

@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import LodprtError, StoreError
-from lodprt.store.bake_store import StoreWriter, dead_partials, is_store, open_store, sample_group
+from lodprt.store.bake_store import is_store, open_store, sample_group
+from lodprt.store.writer import StoreWriter, dead_partials
 from lodprt.store.sample_groups import (COMPLETE, WRITING, complete_samples, discard_incomplete, group_attrs,
                                         is_complete, tidy)
 

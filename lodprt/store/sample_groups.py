@@ -22,7 +22,8 @@ import uuid
 from pathlib import Path
 
 from lodprt.errors import StoreError
-from lodprt.store.bake_store import OWNER_FILE, StoreWriter, sample_group
+from lodprt.store.bake_store import sample_group
+from lodprt.store.writer import OWNER_FILE, StoreWriter
 
 #: the attribute that marks a group complete (written after everything else of the group)
 COMPLETE = "complete"

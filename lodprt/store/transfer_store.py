@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
-from lodprt.store.bake_store import TRANSFER_FORMAT, StoreWriter, prepare_destination, store_format
+from lodprt.store.writer import TRANSFER_FORMAT, StoreWriter, prepare_destination, store_format
 
 # TRANSFER_FORMAT ("lodprt-transfer") is defined next to the point-light format in bake_store, which refuses it
 #: 2: LOD stores keep glossy matrices of the cut only (``transfer/glossy_kept_ids``), ``materials/mirror``

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
-from lodprt.store.bake_store import VOLUME_FORMAT, StoreWriter, prepare_destination, store_format
+from lodprt.store.writer import VOLUME_FORMAT, StoreWriter, prepare_destination, store_format
 
 VOLUME_FORMAT_VERSION = 1
 WHAT = "lodprt volume store"
