@@ -36,7 +36,8 @@ def main():
     p = parser(__doc__.splitlines()[0])
     p.add_argument("--sh-order", type=int, default=4)
     args = p.parse_args()
-    from lodprt.precompute.bake import bake, ray_offset
+    from lodprt.precompute.bake import bake
+    from lodprt.precompute.baker import ray_offset
     from lodprt.devices import resolve_device
 
     device = resolve_device(args.device)
@@ -52,7 +53,7 @@ def main():
         rows.append({"bake": label, "seconds": res.bake_seconds, "load_s": res.load_seconds,
                      "bytes": int(np.mean([s["bytes"] for s in res.samples]))})
     # keep the coefficients of the last Warp bake to compare
-    from lodprt.precompute.bake import Baker
+    from lodprt.precompute.baker import Baker
 
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
     baker = Baker(scene, order, device, ids)

@@ -57,7 +57,7 @@ def rel_rmse(a: np.ndarray, b: np.ndarray) -> float:
 
 def reference(scene, rays: int, bounces: int, device: str) -> list[np.ndarray]:
     """Converged references: per bounce count 0..bounces, (S, V') y_0 of the full-resolution GI radiance."""
-    from lodprt.precompute.bake import Baker, load_kernels
+    from lodprt.precompute.baker import Baker, load_kernels
     from lodprt.precompute.gi import GISettings, attach, constant_coefficient
 
     load_kernels(device)

@@ -31,7 +31,8 @@ from table1 import EYE_OFFSET, exact_phong, rel_rmse, shadow_boundary
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
     from lodprt.precompute import reference
-    from lodprt.precompute.bake import bake, ray_offset
+    from lodprt.precompute.bake import bake
+    from lodprt.precompute.baker import ray_offset
     from lodprt.devices import resolve_device
     from lodprt.model.hierarchy_build import build_hierarchy
     from lodprt.runtime.lights import LightInterpolator

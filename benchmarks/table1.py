@@ -67,7 +67,8 @@ def rel_max(a, b, sel):
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
     from lodprt.precompute import reference
-    from lodprt.precompute.bake import bake, ray_offset
+    from lodprt.precompute.bake import bake
+    from lodprt.precompute.baker import ray_offset
     from lodprt.model.completion import CompletionPlan
     from lodprt.devices import resolve_device
     from lodprt.model.hierarchy_build import build_hierarchy

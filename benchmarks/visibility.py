@@ -21,7 +21,7 @@ from common import environment, parser, plot_path, table, thesis_scene, write
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
     from lodprt.precompute import reference
-    from lodprt.precompute.bake import Baker, load_kernels, ray_offset
+    from lodprt.precompute.baker import Baker, load_kernels, ray_offset
     from lodprt.devices import resolve_device, warp
 
     device = resolve_device(args.device)

@@ -6,7 +6,8 @@ import pytest
 from lodprt.model import sh
 
 from lodprt.precompute import reference
-from lodprt.precompute.bake import Baker, bake, load_kernels, material_tables
+from lodprt.precompute.bake import bake
+from lodprt.precompute.baker import Baker, load_kernels, material_tables
 from lodprt.kernels import shading as kshade
 from lodprt.kernels.visibility import LIT
 from lodprt.devices import warp
@@ -205,7 +206,7 @@ def test_lodprt_bake_is_the_function_after_the_module_is_imported():
 
 def test_ray_offset_is_a_python_float_far_from_the_origin():
     """A small scene far from the origin: the float32-resolution ray offset is a Python float (attributes are JSON)."""
-    from lodprt.precompute.bake import ray_offset
+    from lodprt.precompute.baker import ray_offset
 
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1.0]]) * 1e-3 + 1e3
     scene = assemble_scene([("tri", pos, np.array([[0, 2, 1]]), THESIS_MATERIAL)], None, {}, "lights", "tri")

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from lodprt.precompute.bake import Baker, bake, load_kernels
+from lodprt.precompute.bake import bake
+from lodprt.precompute.baker import Baker, load_kernels
 from lodprt.model.completion import RULE_T15, CompletionPlan, ring_weights
 from lodprt.precompute.light_cut import LightCut
 from lodprt.model.hierarchy import active_ancestors

@@ -452,7 +452,7 @@ def tiny_bake_cases(draw):
 @pytest.fixture(scope="module")
 def cpu_kernels():
     """Warp's bake kernels compiled (or loaded from its cache) before the first example, outside its deadline."""
-    from lodprt.precompute.bake import load_kernels
+    from lodprt.precompute.baker import load_kernels
 
     load_kernels("cpu")
 

@@ -12,7 +12,8 @@ import zarr
 
 from lodprt.errors import LodprtError
 from lodprt.model.scene import Material, assemble_scene
-from lodprt.precompute.bake import Baker, bake
+from lodprt.precompute.bake import bake
+from lodprt.precompute.baker import Baker
 from lodprt.precompute.gi import GISettings, attach, cosine_fibonacci, vertex_areas
 
 SQRT_4PI = math.sqrt(4 * math.pi)

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from lodprt.model import sh
-from lodprt.precompute.bake import Baker, bake, load_kernels
+from lodprt.precompute.bake import bake
+from lodprt.precompute.baker import Baker, load_kernels
 from lodprt.errors import StoreError
 from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 from lodprt.store.bake_store import open_store

@@ -121,7 +121,7 @@ def test_diffuse_radiance_does_not_depend_on_the_eye(kinds, name):
 def test_diffuse_full_store_equals_the_closed_form(kinds):
     """rgb-diffuse-full: every channel of every vertex is kd_c (N.L) I_c / max(d, radius)^2 where Embree sees the
     light, 0 where it does not (a handful of grazing rays may disagree between the two casters)."""
-    from lodprt.precompute.bake import ray_offset
+    from lodprt.precompute.baker import ray_offset
     from lodprt.precompute.reference import LIT, EmbreeCaster, visibility
     from lodprt.store.bake_store import open_store
 

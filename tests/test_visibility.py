@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lodprt.precompute import reference
-from lodprt.precompute.bake import Baker, load_kernels, ray_offset
+from lodprt.precompute.baker import Baker, load_kernels, ray_offset
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 

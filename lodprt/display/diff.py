@@ -10,7 +10,7 @@ from lodprt.store.bake_store import Store, radiance_toward
 
 def full_resolution_radiance(store: Store, sample: int, eye, device: str) -> np.ndarray:
     """Re-bake ``sample`` at full resolution from the stored scene (same float32 arrays as the bake): (V, 3)."""
-    from lodprt.precompute.bake import Baker, load_kernels
+    from lodprt.precompute.baker import Baker, load_kernels
 
     scene = store.scene()
     load_kernels(device)

@@ -94,7 +94,7 @@ class GISettings:
 
 class Interreflection:
     """Device-side interreflection state of one bake, shared read-only by the sample threads (each call allocates
-    its own work arrays). ``baker`` is the bake's :class:`lodprt.precompute.bake.Baker`; ``tree`` the hierarchy
+    its own work arrays). ``baker`` is the bake's :class:`lodprt.precompute.baker.Baker`; ``tree`` the hierarchy
     when the bake uses light cuts (then :meth:`prepare_cut` builds the indirect cut and completion plan)."""
 
     def __init__(self, baker, scene, settings: GISettings):
@@ -262,7 +262,7 @@ class Interreflection:
 
 
 def attach(baker, scene, settings: GISettings, tree=None) -> Interreflection:
-    """Give ``baker`` (``lodprt.precompute.bake.Baker``) its interreflection state; with ``tree`` (a light-cut bake)
+    """Give ``baker`` (``lodprt.precompute.baker.Baker``) its interreflection state; with ``tree`` (a light-cut bake)
     also the indirect cut and completion plan. Returns the state."""
     baker.gi = Interreflection(baker, scene, settings)
     if tree is not None:
