@@ -80,7 +80,7 @@ def main():
 
     fig, ax = plt.subplots(figsize=(7, 3.5))
     y = np.arange(len(rows))
-    ax.barh(y + 0.2, [r["build_s"] for r in rows], 0.4, label="lodprt hierarchy (levels + half-edge collapses)")
+    ax.barh(y + 0.2, [r["build_s"] for r in rows], 0.4, label="lodprt hierarchy (rounds of half-edge collapses)")
     ax.barh(y - 0.2, [r["pymeshlab_s"] for r in rows], 0.4, label="pymeshlab QEM to the same base size")
     ax.set_yticks(y, [f"{r['mesh']}\n{r['vertices']:,} v" for r in rows])
     ax.set_xlabel("seconds")

@@ -139,48 +139,74 @@ class Hierarchy:
         return int(sum(a.nbytes for a in self.to_arrays().values()))
 
 
-def node_heights(h: Hierarchy) -> np.ndarray:
-    """(N,) int32 height of every node: 0 for leaves, 1 + the higher child's height above (creation order)."""
-    out = [0] * h.num_nodes
-    ch = h.children.tolist()
-    for k in range(h.num_vertices, h.num_nodes):  # children always precede their parent
-        a, b = ch[k]
-        ha, hb = out[a], out[b]
-        out[k] = 1 + (ha if ha > hb else hb)
-    return np.asarray(out, np.int32)
+def depth_levels(parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes grouped by their distance from their root: (N,) int64 node ids in order of depth (roots first, stable
+    within a depth) and (D + 2,) int64 bounds, the nodes at depth ``d`` being ``order[bounds[d]:bounds[d + 1]]``.
 
+    Vectorised list ranking (pointer jumping over ``parent``: log2(depth) passes), then a counting sort."""
+    parent = np.asarray(parent)
+    N = len(parent)
+    depth = (parent >= 0).astype(np.int64)
+    up = parent.astype(np.int64)
+    while True:
+        go = np.flatnonzero(up >= 0)
+        if not len(go):
+            break
+        nxt = up[go]
+        depth[go] += depth[nxt]  # right-hand sides are read before the writes: one synchronous jump
+        up[go] = up[nxt]
+    order = np.argsort(depth, kind="stable")
+    bounds = np.searchsorted(depth[order], np.arange(int(depth.max(initial=0)) + 2))
+    return order, bounds
+
+
+def node_heights(h: Hierarchy) -> np.ndarray:
+    """(N,) int32 height of every node: 0 for leaves, 1 + the higher child's height above (vectorised, deepest
+    nodes first)."""
+    return _heights(h.parent, h.children)
+
+
+def _heights(parent, children) -> np.ndarray:
+    out = np.zeros(len(parent), np.int32)
+    order, bounds = depth_levels(parent)
+    for lo, hi in zip(bounds[-2::-1], bounds[:0:-1]):
+        k = order[lo:hi]
+        k = k[children[k, 0] >= 0]
+        out[k] = 1 + np.maximum(out[children[k, 0]], out[children[k, 1]])
+    return out
 
 
 def leaf_layout(parent, children, V) -> tuple[np.ndarray, np.ndarray]:
-    """Leaves (V,) int32 in depth-first order (child 0 first) and each node's [lo, hi) range (N, 2) int64 into it.
+    """Leaves (V,) int32 in depth-first order (child 0 first, roots in id order) and each node's [lo, hi) range
+    (N, 2) int64 into it.
 
     parent (N,), children (N, 2) as in ``Hierarchy``, V the number of leaves; the leaves under node ``k`` are
-    ``order[range[k, 0]:range[k, 1]]``, so a subtree's leaves are one slice."""
+    ``order[range[k, 0]:range[k, 1]]``, so a subtree's leaves are one slice. Vectorised: leaf counts bottom-up and
+    range starts top-down, one depth at a time (``depth_levels``)."""
+    parent = np.asarray(parent)
+    children = np.asarray(children)
     N = len(parent)
-    order: list[int] = []
+    order, bounds = depth_levels(parent)
+    count = np.zeros(N, np.int64)
+    count[children[:, 0] < 0] = 1
+    for lo, hi in zip(bounds[-2::-1], bounds[:0:-1]):  # deepest first
+        k = order[lo:hi]
+        k = k[children[k, 0] >= 0]
+        count[k] = count[children[k, 0]] + count[children[k, 1]]
     rng = np.zeros((N, 2), np.int64)
-    lo_l = [0] * N
-    hi_l = [0] * N
-    ch = children.tolist()
-    stack = [(int(r), False) for r in np.flatnonzero(parent < 0)[::-1]]
-    while stack:
-        k, closing = stack.pop()
-        if closing:
-            hi_l[k] = len(order)
-            continue
-        lo_l[k] = len(order)
-        c0, c1 = ch[k]
-        if c0 < 0:
-            order.append(k)
-            hi_l[k] = len(order)
-        else:
-            stack.append((k, True))
-            stack.append((c1, False))
-            stack.append((c0, False))
-    rng[:, 0] = lo_l
-    rng[:, 1] = hi_l
-    return np.asarray(order, np.int32), rng
-
+    roots = order[bounds[0] : bounds[1]]  # stable sort: roots in id order
+    rng[roots, 0] = np.cumsum(count[roots]) - count[roots]
+    for lo, hi in zip(bounds[:-2], bounds[1:-1]):  # shallowest first
+        k = order[lo:hi]
+        k = k[children[k, 0] >= 0]
+        c0, c1 = children[k, 0], children[k, 1]
+        rng[c0, 0] = rng[k, 0]
+        rng[c1, 0] = rng[k, 0] + count[c0]
+    rng[:, 1] = rng[:, 0] + count
+    leaf = np.flatnonzero(children[:, 0] < 0)
+    out = np.zeros(V, np.int32)
+    out[rng[leaf, 0]] = leaf
+    return out, rng
 
 
 def active_ancestors(h: Hierarchy, active: np.ndarray) -> np.ndarray:

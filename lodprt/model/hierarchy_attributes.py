@@ -1,5 +1,5 @@
 """Hierarchy build, per-node geometry (SPEC 3; thesis 3.2, figures 7 and 10): normal cones, bounding radii and
-error vectors of the nodes ``lodprt.model.hierarchy_build`` creates, vectorised.
+error vectors of the nodes ``lodprt.model.hierarchy_build`` creates, vectorised over one round of collapses.
 
 A parent's cone is the minimal cone holding its two children's cones (figure 7); its radius bounds every leaf
 below; the error vector of a collapse ``v -> u`` is ``p - p'``, ``p'`` the closest point to ``v``'s position on the
@@ -13,43 +13,7 @@ import math
 import numpy as np
 
 
-def cones_and_radii(positions, normals, children, vertex, V):
-    """Normal cones (figure 7), bounding radii and heights, bottom-up one height at a time (vectorised).
-
-    positions, normals (V, 3) float64 (unit normals: the leaves' cones), children (N, 2), vertex (N,) as in
-    ``Hierarchy``. Returns axis (N, 3), half-angle (N,) radians, radius (N,) float64 and height (N,) int32.
-
-    A parent's cone is the minimal cone enclosing its two children's cones, so it holds every leaf normal below;
-    its radius is the larger of child radius + distance from the parent's position to the child's.
-    """
-    N = len(children)
-    axis = np.zeros((N, 3))
-    half = np.zeros(N)
-    radius = np.zeros(N)
-    axis[:V] = normals
-    height = [0] * N
-    ch = children.tolist()
-    for k in range(V, N):  # creation order: children first
-        a, b = ch[k]
-        ha, hb = height[a], height[b]
-        height[k] = 1 + (ha if ha > hb else hb)
-    height = np.asarray(height, np.int32)
-    if N > V:
-        internal = np.arange(V, N)
-        order = internal[np.argsort(height[V:], kind="stable")]
-        bounds = np.searchsorted(height[order], np.arange(1, height.max() + 2))
-        for lo, hi in zip(bounds[:-1], bounds[1:]):
-            k = order[lo:hi]
-            c0, c1 = children[k, 0], children[k, 1]
-            axis[k], half[k] = _merge_cones(axis[c0], half[c0], axis[c1], half[c1])
-            p = positions[vertex[k]]
-            r0 = radius[c0] + np.linalg.norm(positions[vertex[c0]] - p, axis=1)
-            r1 = radius[c1] + np.linalg.norm(positions[vertex[c1]] - p, axis=1)
-            radius[k] = np.maximum(r0, r1)
-    return axis, half, radius, height
-
-
-def _merge_cones(a1, t1, a2, t2):
+def merge_cones(a1, t1, a2, t2):
     """Minimal cones (M, 3) axes, (M,) half-angles holding cones (a1, t1) and (a2, t2) (unit axes, radians).
 
     If one cone holds the other, it is the answer; otherwise the half-angle is (g + t1 + t2) / 2 (g the angle

@@ -1,9 +1,11 @@
-"""Hierarchy build, pass 1 (SPEC 3; thesis 3.2): the levels from pymeshlab's chained QEM halvings.
+"""Mesh groups for the hierarchy build, and pymeshlab's chained QEM halvings (SPEC 3; thesis 3.2).
 
-Each level is decimated from the previous one with ``optimalplacement=False`` (survivors keep their original,
-bit-identical positions; levels are nested), every group of the mesh on its own; a vertex gets the level at which
-it disappears (0: base mesh). ``representative_scores`` reads from two consecutive levels which survivor gained a
-removed vertex's edges (the hint for pass 2, ``lodprt.model.hierarchy_build``). Details: docs/HIERARCHY.md.
+``mesh_groups`` gives the groups ``lodprt.model.hierarchy_build`` builds independently (connected components, split
+further by ``component``). ``pymeshlab_chain`` / ``pymeshlab_levels`` decimate each group level after level with
+``optimalplacement=False`` (survivors keep their original, bit-identical positions; levels are nested) and give the
+level at which each vertex disappears; ``representative_scores`` reads from two consecutive levels which survivor
+gained a removed vertex's edges. The build no longer uses them (one pymeshlab halving alone needs about 2.3 KB per
+vertex, docs/SCALE.md); they stay as the reference QEM decimation for comparisons. Details: docs/HIERARCHY.md.
 """
 
 from __future__ import annotations
