@@ -1,4 +1,4 @@
-"""Scale: hierarchy build and bake time and peak memory from 75k to 2M vertices, bake time from 9 to 729 samples.
+"""Scale: hierarchy build, bake and run-time time and peak memory from 75k to 2M vertices and from 9 to 729 samples.
 
     python benchmarks/scale.py [--quick] [--floors 200 380 ...] [--budget SECONDS] [--json PATH]
 
@@ -12,7 +12,12 @@ measurement runs in a fresh child process; its peak resident memory is the kerne
   build) / vertices;
 * ``bake``: the whole ``lodprt bake SCENE.toml -o OUT.zarr`` command (scene loading, hierarchy, light cut at the
   default 5 degrees, SH order 4, store writing), 3 x 3 x 3 = 27 light samples for the vertex sweep and 3 x 1 x 3 ..
-  9 x 9 x 9 (9 .. 729) samples on the 200 x 200 floor for the sample sweep.
+  9 x 9 x 9 (9 .. 729) samples on the 200 x 200 floor for the sample sweep;
+* ``run time``: after each bake, ``Runtime(store)`` opened and its first frame drawn (800 x 600, default view): seconds
+  and the peak above the child's start (Python, Warp, kernels), and how many light samples it completed (lazily:
+  only those the first light uses, ``lodprt.runtime.samples``);
+* ``workers``: the 27-sample bake of the sample-sweep floor in-process, with ``--workers 1`` and ``--workers 2``
+  (a LocalCluster of worker processes; the command's wall time, cluster start included, and the client's peak).
 
 Floors are measured in increasing size until ``--budget`` seconds have gone by (a row that starts before the
 budget runs to its end). Writes benchmarks/results/scale[-quick].json and .png (log-log, fitted exponents).
@@ -112,12 +117,41 @@ sys.exit(rc)
 """
 
 
-def measure_bake(floor: int, grid: list[int], device: str, tmp: Path) -> dict:
+RUNTIME_CHILD = """
+import json, sys, time
+from lodprt.devices import warp
+from lodprt.runtime.camera import Camera, default_eye, scene_centre
+from lodprt.runtime.session import Runtime
+from lodprt.store.bake_store import open_store
+warp()
+status = lambda key: int([ln for ln in open("/proc/self/status") if ln.startswith(key + ":")][0].split()[1]) * 1024
+before = status("VmRSS")
+t = time.perf_counter()
+store = open_store(sys.argv[1])
+rt = Runtime(store, device=sys.argv[2])
+t1 = time.perf_counter()
+rt.set_camera(Camera(eye=default_eye(store), target=scene_centre(store), width=800, height=600))
+frame = rt.update()
+t2 = time.perf_counter()
+print(json.dumps({"open_s": t1 - t, "first_frame_s": t2 - t1, "rss_before": before, "peak": status("VmHWM"),
+                  "completed": rt.samples.completed, "samples": store.num_samples, "triangles": len(frame.triangles)}))
+"""
+
+
+def measure_runtime(store: Path, device: str) -> dict:
+    """Open a store with the run time and draw its first frame (800 x 600, default view), in a child process: seconds
+    and the peak resident bytes above the child's start (Python, Warp and the kernels loaded)."""
+    res, _, _ = run_child([sys.executable, "-c", RUNTIME_CHILD, str(store), device])
+    return {**res, "above_start": res["peak"] - res["rss_before"]}
+
+
+def measure_bake(floor: int, grid: list[int], device: str, tmp: Path, options: tuple = ()) -> dict:
     scene = tmp / "scene.toml"
     scene.write_text(f'[[object]]\nmesh = "{BUNNY.resolve().as_posix()}"\n\n[floor]\nresolution = {floor}\n\n'
                      f"[lights]\ngrid = {list(grid)}\n")
     out = tmp / "out.zarr"
-    cmd = [sys.executable, "-c", BAKE_CHILD, "bake", str(scene), "-o", str(out), "--overwrite", "--device", device]
+    cmd = [sys.executable, "-c", BAKE_CHILD, "bake", str(scene), "-o", str(out), "--overwrite", "--device", device,
+           *options]
     res, _, wall = run_child(cmd)
     peak = res["peak"]
     from lodprt.store.bake_store import open_store
@@ -146,6 +180,7 @@ def vertex_sweep(floors, device, budget, t0, tmp) -> list[dict]:
         pm = measure_build("pymeshlab", floor)
         h = measure_build("hierarchy", floor)
         b = measure_bake(floor, [3, 3, 3], device, tmp)
+        rt = measure_runtime(tmp / "out.zarr", device)
         V = h["vertices"]
         rows.append({"floor": floor, "vertices": V, "hierarchy_s": h["seconds"], "pymeshlab_s": pm["seconds"],
                      "ratio": h["seconds"] / pm["seconds"], "hierarchy_peak_mib": h["peak"] / 2**20,
@@ -153,7 +188,9 @@ def vertex_sweep(floors, device, budget, t0, tmp) -> list[dict]:
                      "roots": h["roots"], "depth": h["depth"], "rounds": h["rounds"],
                      "stored_b_per_v": h["hierarchy_bytes"] / V, "bake_s": b["seconds"],
                      "bake_hierarchy_s": b["hierarchy_seconds"], "bake_peak_mib": b["peak"] / 2**20,
-                     "bake_b_per_v": b["peak"] / V, "samples": b["samples"]})
+                     "bake_b_per_v": b["peak"] / V, "samples": b["samples"], "open_s": rt["open_s"],
+                     "first_frame_s": rt["first_frame_s"], "runtime_mib": rt["above_start"] / 2**20,
+                     "runtime_completed": rt["completed"]})
         r = rows[-1]
         print(f"floor {floor}: {V:,} vertices, hierarchy {r['hierarchy_s']:.1f} s ({r['ratio']:.2f}x pymeshlab), "
               f"{r['hierarchy_b_per_v']:.0f} B/vertex; bake {r['bake_s']:.1f} s, peak {r['bake_peak_mib']:.0f} MiB",
@@ -165,10 +202,27 @@ def sample_sweep(floor, grids, device, tmp) -> list[dict]:
     rows = []
     for grid in grids:
         b = measure_bake(floor, grid, device, tmp)
+        rt = measure_runtime(tmp / "out.zarr", device)
         rows.append({"floor": floor, "grid": "x".join(map(str, grid)), "samples": b["samples"], "bake_s": b["seconds"],
                      "bake_hierarchy_s": b["hierarchy_seconds"], "bake_peak_mib": b["peak"] / 2**20,
-                     "store_mib": b["store_bytes"] / 2**20})
-        print(f"{b['samples']} samples: bake {b['seconds']:.1f} s, peak {b['peak'] / 2**20:.0f} MiB", flush=True)
+                     "store_mib": b["store_bytes"] / 2**20, "open_s": rt["open_s"], "first_frame_s": rt["first_frame_s"],
+                     "runtime_mib": rt["above_start"] / 2**20, "runtime_completed": rt["completed"]})
+        print(f"{b['samples']} samples: bake {b['seconds']:.1f} s, peak {b['peak'] / 2**20:.0f} MiB; run time open "
+              f"{rt['open_s']:.1f} s + first frame {rt['first_frame_s']:.1f} s, {rt['above_start'] / 2**20:.0f} MiB "
+              f"({rt['completed']} samples completed)", flush=True)
+    return rows
+
+
+def worker_sweep(floor, grid, device, tmp) -> list[dict]:
+    """The same bake in-process and on a LocalCluster of 1 and 2 worker processes (--workers; wall seconds of the
+    whole command, cluster start included; peak of the client process)."""
+    rows = []
+    for label, options in (("in-process", ()), ("--workers 1", ("--workers", "1")), ("--workers 2", ("--workers", "2"))):
+        b = measure_bake(floor, grid, device, tmp, options)
+        rows.append({"floor": floor, "samples": b["samples"], "mode": label, "bake_s": b["seconds"],
+                     "client_peak_mib": b["peak"] / 2**20})
+        print(f"{label}: {b['samples']} samples, {b['seconds']:.1f} s, client peak {b['peak'] / 2**20:.0f} MiB",
+              flush=True)
     return rows
 
 
@@ -221,23 +275,32 @@ def main():
     with tempfile.TemporaryDirectory() as d:
         vrows = vertex_sweep(floors, device, args.budget, t0, Path(d))
         srows = sample_sweep(sfloor, grids, device, Path(d))
+        wrows = worker_sweep(sfloor, [3, 3, 3] if not args.quick else [2, 1, 1], device, Path(d))
     V = [r["vertices"] for r in vrows]
     fits = {k: exponent(V, [r[k] for r in vrows]) for k in ("hierarchy_s", "pymeshlab_s", "bake_s")}
     fits["hierarchy_bytes"] = exponent(V, [r["hierarchy_b_per_v"] * r["vertices"] for r in vrows])  # above the start
     fits["bake_bytes"] = exponent(V, [r["bake_b_per_v"] * r["vertices"] for r in vrows])  # whole peak
     fits["samples_bake_s"] = exponent([r["samples"] for r in srows], [r["bake_s"] for r in srows])
+    fits["runtime_bytes"] = exponent(V, [r["runtime_mib"] for r in vrows])
+    fits["samples_runtime_bytes"] = exponent([r["samples"] for r in srows], [r["runtime_mib"] for r in srows])
     print(table(vrows, [("floor", "floor", "d"), ("vertices", "vertices", ","), ("hierarchy_s", "hierarchy s", ".1f"),
                         ("pymeshlab_s", "halving s", ".1f"), ("ratio", "x halving", ".2f"),
                         ("hierarchy_b_per_v", "build B/v", ".0f"), ("pymeshlab_b_per_v", "halving B/v", ".0f"),
                         ("bake_s", "bake s", ".1f"), ("bake_peak_mib", "bake peak MiB", ".0f"),
-                        ("bake_b_per_v", "bake B/v", ".0f")]))
+                        ("bake_b_per_v", "bake B/v", ".0f"), ("open_s", "open s", ".1f"),
+                        ("first_frame_s", "1st frame s", ".1f"), ("runtime_mib", "run time MiB", ".0f")]))
     print(table(srows, [("floor", "floor", "d"), ("grid", "grid", "s"), ("samples", "samples", "d"),
                         ("bake_s", "bake s", ".1f"), ("bake_peak_mib", "peak MiB", ".0f"),
-                        ("store_mib", "store MiB", ".1f")]))
+                        ("store_mib", "store MiB", ".1f"), ("open_s", "open s", ".1f"),
+                        ("first_frame_s", "1st frame s", ".1f"), ("runtime_mib", "run time MiB", ".0f"),
+                        ("runtime_completed", "completed", "d")]))
+    print(table(wrows, [("floor", "floor", "d"), ("samples", "samples", "d"), ("mode", "bake", "s"),
+                        ("bake_s", "seconds", ".1f"), ("client_peak_mib", "client peak MiB", ".0f")]))
     print("fitted exponents (time or memory ~ size^e):", ", ".join(f"{k} {v:.2f}" for k, v in fits.items()))
     name = "scale" + ("-quick" if args.quick else "")
     print("wrote", write(name, {"benchmark": "scale", "quick": args.quick, "environment": environment(device),
                                 "cores": os.cpu_count(), "vertex_rows": vrows, "sample_rows": srows,
+                                "worker_rows": wrows,
                                 "exponents": fits, "seconds": time.perf_counter() - t0}, args.json))
     plot(name, vrows, srows, fits)
     print("wrote", plot_path(name))

@@ -82,3 +82,27 @@ def test_bad_cache_size_is_refused(store):
         SampleCache(store, cache_bytes=-1)
     with pytest.raises(LodprtError, match="does not exist"):
         SampleCache(store).ensure([store.num_samples])
+
+
+def test_run_time_memory_does_not_grow_with_the_samples(tmp_path):
+    """Opening a store of 25 light samples allocates (tracemalloc) about what a store of 1 sample does: the run
+    time completes the samples its light uses, not all of them."""
+    import tracemalloc
+
+    from lodprt.model.scene import load_scene
+    from lodprt.precompute.bake import bake
+    from test_resume import scene_file
+
+    peaks, per = {}, 0
+    for grid in ((1, 1, 1), (5, 1, 5)):
+        toml = scene_file(tmp_path, grid=grid, name=f"scene{grid[0]}.toml")
+        out = tmp_path / f"scene{grid[0]}.zarr"
+        bake(load_scene(str(toml)), out, sh_order=8, device="cpu", threshold_deg=5.0)
+        store = open_store(out)
+        per = store.num_vertices * store.coefficients_per_vertex * 4  # one completed sample, float32
+        tracemalloc.start()
+        rt = Runtime(store, device="cpu", lod=False)
+        peaks[grid] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert rt.samples.completed <= 8
+    assert peaks[(5, 1, 5)] - peaks[(1, 1, 1)] < 4 * per, (peaks, per)  # all 25 would add 24 x per

@@ -27,8 +27,8 @@ class SampleCache:
     samples sit together for the per-frame gathers; ``slot_sample[s]`` is the sample in slot ``s`` (-1: empty).
 
     ``ensure(samples)`` returns the slot of each sample, completing the missing ones (T-15, ``store.complete``)
-    into the least recently used slots not asked for now; the cache grows when one frame asks for more samples
-    than it has slots. ``derive(name, make, shape, dtype)`` adds a per-slot array ``(rows, slots) + shape`` filled
+    into empty slots, then (once the slots reach ``cache_bytes``) into the least recently used ones not asked for
+    now; slots are allocated as they are needed (doubling), and never fewer than one frame asks for. ``derive(name, make, shape, dtype)`` adds a per-slot array ``(rows, slots) + shape`` filled
     by ``make(coefficients)`` for every sample loaded, now and later. ``version`` changes whenever a slot's
     content does (the device copies are refreshed from it).
     """
@@ -96,11 +96,14 @@ class SampleCache:
             raise LodprtError(f"light sample {int(samples.max())} does not exist (the store has {self.S})")
         self.clock += 1
         want = np.unique(samples)
-        self._grow(self._capacity(len(want)))  # (only ever grows: the byte limit counts what is derived so far)
         where = {int(k): int(s) for s, k in enumerate(self.slot_sample) if k >= 0}
         keep = np.array([where[k] for k in want.tolist() if k in where], np.int64)
         self.last_used[keep] = self.clock
         missing = [k for k in want.tolist() if k not in where]
+        empty = int((self.slot_sample < 0).sum())
+        cap = self._capacity(len(want))  # >= len(want): one frame's samples always fit
+        if len(missing) > empty and self.slots < cap:  # grow (doubling) before replacing anything, up to the cap
+            self._grow(min(cap, max(self.slots + len(missing) - empty, 2 * self.slots)))
         for i, k in enumerate(missing):
             free = np.flatnonzero(self.last_used != self.clock)
             s = int(free[np.argmin(self.last_used[free])])  # empty slots read -1: taken first

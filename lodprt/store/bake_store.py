@@ -54,13 +54,18 @@ class Store:
         self.codec = str(self.attrs.get("codec", "none")) if version == 2 else "none"
         self._cache: dict[str, np.ndarray] = {}
 
-    def read(self, name: str) -> np.ndarray:
-        if name not in self._cache:
-            try:
-                self._cache[name] = self.root[name][...]
-            except KeyError as exc:
-                raise StoreError(f"{self.path}: field '{name}' is missing") from exc
-        return self._cache[name]
+    def read(self, name: str, *, cache: bool = True) -> np.ndarray:
+        """Array ``name`` as written; kept on this Store unless ``cache`` is False (a light sample's rows: a store
+        of many samples is read one sample at a time, its memory does not grow with the samples read)."""
+        if name in self._cache:
+            return self._cache[name]
+        try:
+            value = self.root[name][...]
+        except KeyError as exc:
+            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
+        if cache:
+            self._cache[name] = value
+        return value
 
     # -- scene -----------------------------------------------------------------------------------------------
     @property
@@ -116,7 +121,7 @@ class Store:
             from lodprt.store.codecs import read_sample
 
             return read_sample(self, k)[:2]
-        return self.read(f"{g}/vertex_ids"), self.read(f"{g}/coefficients")
+        return self.read(f"{g}/vertex_ids", cache=False), self.read(f"{g}/coefficients", cache=False)
 
     def cut_arrays(self, k: int) -> dict:
         """{"cut_nodes", "dark"} of sample ``k`` of a light-cut store (decoded in version 2), {} in full mode."""
@@ -126,7 +131,7 @@ class Store:
 
             return read_cut(self, k)
         if f"{g}/cut_nodes" in self.root:
-            return {"cut_nodes": self.read(f"{g}/cut_nodes"), "dark": self.read(f"{g}/dark")}
+            return {"cut_nodes": self.read(f"{g}/cut_nodes", cache=False), "dark": self.read(f"{g}/dark", cache=False)}
         return {}
 
     def sample_info(self, k: int) -> dict:

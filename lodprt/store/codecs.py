@@ -387,7 +387,7 @@ def sample_arrays(store, k: int) -> tuple[dict, dict]:
     """(arrays by name, attributes) of the group ``samples/KKKKK`` as stored."""
     g = f"samples/{k:05d}"
     group = store.root[g]
-    return {name: store.read(f"{g}/{name}") for name in group.array_keys()}, dict(group.attrs)
+    return {name: store.read(f"{g}/{name}", cache=False) for name in group.array_keys()}, dict(group.attrs)
 
 
 def read_sample(store, k: int) -> tuple[np.ndarray, np.ndarray, dict]:
