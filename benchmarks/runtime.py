@@ -154,8 +154,8 @@ def main():
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
-    print(f"\nRuntime init (completion of {samples} samples, upload): {init_s:.1f} s; the first frame also makes "
-          "the per-node coefficient boxes")
+    print(f"\nRuntime init (hierarchy, upload, the first light's samples completed with their per-node bounds; "
+          f"the store has {samples}): {init_s:.1f} s; a later frame completes a sample when its light first reaches it")
     print(table(rows, [("path", "path", "s"), ("mode", "mode", "s"), ("median_triangles", "triangles", ",.0f"),
                        ("median_ms_cut", "cut ms", ".2f"), ("median_ms_triangulate", "tri ms", ".2f"),
                        ("median_ms_relight", "relight ms", ".2f"), ("median_ms_total", "median ms", ".2f"),
