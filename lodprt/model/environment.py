@@ -73,6 +73,11 @@ class Environment:
         """
         return self.radiance().T @ projection_weights(self.kind, self.resolution, order, supersample)
 
+    def stored(self, order: int) -> tuple[np.ndarray, dict]:
+        """What a store records of the lighting it was baked with (``StoreWriter.environment``): the SH
+        coefficients (3, order^2) float64 and {"source", "kind", "resolution"}."""
+        return self.project(order), {"source": self.source, "kind": self.kind, "resolution": self.resolution}
+
     def mip(self, level: int) -> "Environment":
         """The map downsampled ``level`` times by the solid-angle-weighted 2 x 2 box filter (I-3.2): the four
         children of a texel cover exactly its solid angle, so total power and the constant coefficient are kept."""

@@ -167,10 +167,7 @@ def bake_neighbourhood(scene, object_name: str, out, *, grid=(16, 16, 16), margi
                             time.perf_counter() - t_grid)
     if out is None:
         return res
-    env = None
-    if environment is not None:
-        env = (environment.project(order),
-               {"source": environment.source, "kind": environment.kind, "resolution": environment.resolution})
+    env = None if environment is None else environment.stored(order)
     arrays = {"object/positions": pos.astype(np.float32), "object/normals": normals.astype(np.float32),
               "object/faces": faces, "object/albedo": kd.astype(np.float32), "object/transfer": own}
     res.path = write_neighbourhood_store(

@@ -433,10 +433,7 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device, cut_nodes, tree, gkept)
     if out is None:
         return result
-    env = None
-    if environment is not None:
-        env = (environment.project(order),
-               {"source": environment.source, "kind": environment.kind, "resolution": environment.resolution})
+    env = None if environment is None else environment.stored(order)
     result.path = write_transfer_store(
         Path(out), scene, overwrite=overwrite, diffuse=diffuse.transfer, glossy_ids=gids, glossy=gmat,
         glossy_kept_ids=gkept if cut_nodes is not None else None, cut_nodes=cut_nodes, tree=tree, hierarchy_seconds=hierarchy_seconds, environment=env,

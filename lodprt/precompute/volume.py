@@ -206,10 +206,7 @@ def bake_volume(volume, out, *, order: int = 3, rays: int = 128, bounces: int = 
     bake = VolumeBake(None, res, t_load, device)
     if out is None:
         return bake
-    env = None
-    if environment is not None:
-        env = (environment.project(order),
-               {"source": environment.source, "kind": environment.kind, "resolution": environment.resolution})
+    env = None if environment is None else environment.stored(order)
     bake.path = write_volume_store(
         Path(out), volume, overwrite=overwrite, transfer=res.transfer, environment=env,
         attrs=dict(source=str(volume.source), sh_order=int(order), rays=int(rays), directions="spherical-fibonacci",

@@ -38,8 +38,7 @@ def compress_store(source: str | os.PathLike | Store, out: str | os.PathLike, co
     channels, ncoef = int(src.attrs["channels"]), src.coefficients_per_vertex
     codecs.check_layout(codec, channels, ncoef, option)
     t0 = time.perf_counter()
-    writer = StoreWriter(out, overwrite=overwrite)
-    try:
+    with StoreWriter(out, overwrite=overwrite) as writer:
         copy_static(src, writer)
         parent = src.read("hierarchy/parent").astype(np.int64) if src.has_hierarchy else None
         vertex = src.read("hierarchy/vertex").astype(np.int64) if src.has_hierarchy else None
@@ -65,9 +64,6 @@ def compress_store(source: str | os.PathLike | Store, out: str | os.PathLike, co
             attrs.update(format_version=COMPRESSED_VERSION, codec=codec.name, codec_bytes=codec_bytes)
         writer.attrs(**attrs)
         path = writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
     return {"path": str(path), "codec": codec.name, "seconds": time.perf_counter() - t0, "samples": infos,
             "codec_bytes": codec_bytes}
 

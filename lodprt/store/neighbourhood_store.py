@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
+from lodprt.store.reader import FormatStore
 from lodprt.store.writer import NEIGHBOURHOOD_FORMAT, StoreWriter, prepare_destination, store_format
 
 NEIGHBOURHOOD_FORMAT_VERSION = 1
@@ -41,61 +42,27 @@ def write_neighbourhood_store(path: str | os.PathLike, *, overwrite: bool, matri
     """
     from lodprt.version import __version__
 
-    writer = StoreWriter(path, overwrite=overwrite, format=NEIGHBOURHOOD_FORMAT, what=WHAT)
-    try:
+    with StoreWriter(path, overwrite=overwrite, format=NEIGHBOURHOOD_FORMAT, what=WHAT) as writer:
         writer.array("grid/matrices", np.asarray(matrices, np.float32))
         for name, a in arrays.items():
             writer.array(name, a)
-        if environment is not None:
-            coefficients, env_attrs = environment
-            writer.array("environment/coefficients", np.asarray(coefficients, np.float64))
-            writer.attrs("environment", **env_attrs)
+        writer.environment(environment)
         writer.attrs(format=NEIGHBOURHOOD_FORMAT, format_version=NEIGHBOURHOOD_FORMAT_VERSION,
                      lodprt_version=__version__, **attrs)
         return writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
 
 
-class NeighbourhoodStore:
+class NeighbourhoodStore(FormatStore):
     """Read access to a ``lodprt-neighbourhood`` store."""
 
-    def __init__(self, path):
-        import zarr
+    FORMAT, VERSIONS, WHAT = NEIGHBOURHOOD_FORMAT, (NEIGHBOURHOOD_FORMAT_VERSION,), WHAT
+    BAKE = "lodprt bake-neighbourhood"
 
-        self.path = Path(path)
-        if not self.path.exists():
-            raise StoreError(f"{self.path}: no such store")
-        if not is_neighbourhood_store(self.path):
-            raise StoreError(f"{self.path}: not a lodprt neighbourhood store (zarr.json without attribute "
-                             f"format='{NEIGHBOURHOOD_FORMAT}'; bake one with lodprt bake-neighbourhood)")
-        self.root = zarr.open_group(str(self.path), mode="r")
-        self.attrs = dict(self.root.attrs)
-        if self.attrs.get("format_version") != NEIGHBOURHOOD_FORMAT_VERSION:
-            raise StoreError(f"{self.path}: format_version {self.attrs.get('format_version')!r}; this lodprt reads "
-                             f"version {NEIGHBOURHOOD_FORMAT_VERSION}")
+    def __init__(self, path):
+        super().__init__(path)
         for key in ("lo", "hi", "grid", "sh_order"):
             if key not in self.attrs:
                 raise StoreError(f"{self.path}: root attribute '{key}' is missing")
-
-    def read(self, name: str) -> np.ndarray:
-        try:
-            return self.root[name][...]
-        except KeyError as exc:
-            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
-
-    def has(self, name: str) -> bool:
-        try:
-            self.root[name]
-            return True
-        except KeyError:
-            return False
-
-    @property
-    def order(self) -> int:
-        """Bands of the lighting the matrices take."""
-        return int(self.attrs["sh_order"])
 
     @property
     def lo(self) -> np.ndarray:

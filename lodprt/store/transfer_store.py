@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
+from lodprt.store.reader import FormatStore
 from lodprt.store.writer import TRANSFER_FORMAT, StoreWriter, prepare_destination, store_format
 
 # TRANSFER_FORMAT ("lodprt-transfer") is defined next to the point-light format in bake_store, which refuses it
@@ -48,8 +49,7 @@ def write_transfer_store(path: str | os.PathLike, scene, *, overwrite: bool, dif
     """
     from lodprt.version import __version__
 
-    writer = StoreWriter(path, overwrite=overwrite, format=TRANSFER_FORMAT, what=WHAT)
-    try:
+    with StoreWriter(path, overwrite=overwrite, format=TRANSFER_FORMAT, what=WHAT) as writer:
         arr = writer.array
         arr("scene/positions", scene.positions.astype(np.float32))
         arr("scene/normals", scene.normals.astype(np.float32))
@@ -74,16 +74,10 @@ def write_transfer_store(path: str | os.PathLike, scene, *, overwrite: bool, dif
             arr("transfer/glossy_kept_ids", np.asarray(glossy_kept_ids, np.int32))
         if glossy is not None:
             arr("transfer/glossy", glossy)
-        if environment is not None:
-            coefficients, env_attrs = environment
-            arr("environment/coefficients", coefficients)
-            writer.attrs("environment", **env_attrs)
+        writer.environment(environment)
         writer.attrs(format=TRANSFER_FORMAT, format_version=TRANSFER_FORMAT_VERSION, lodprt_version=__version__,
                      **attrs)
         return writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
 
 
 def complete_glossy(h, positions, normals, cut_nodes, kept_ids, matrices, glossy_ids) -> np.ndarray:
@@ -115,40 +109,10 @@ def complete_transfer(h, positions, normals, cut_nodes, coefficients) -> np.ndar
                          dark=np.zeros(len(cut_nodes), bool))
 
 
-class TransferStore:
+class TransferStore(FormatStore):
     """Read access to a ``lodprt-transfer`` store (docs/FORMAT.md)."""
 
-    def __init__(self, path):
-        import zarr
-
-        self.path = Path(path)
-        if not self.path.exists():
-            raise StoreError(f"{self.path}: no such store")
-        if not is_transfer_store(self.path):
-            raise StoreError(f"{self.path}: not a lodprt transfer store (zarr.json without attribute format='{TRANSFER_FORMAT}'; "
-                             "bake one with lodprt bake-environment)")
-        self.root = zarr.open_group(str(self.path), mode="r")
-        self.attrs = dict(self.root.attrs)
-        if self.attrs.get("format_version") not in READABLE_VERSIONS:
-            raise StoreError(f"{self.path}: format_version {self.attrs.get('format_version')!r}; this lodprt reads "
-                             f"versions {', '.join(map(str, READABLE_VERSIONS))}")
-
-    def read(self, name: str) -> np.ndarray:
-        try:
-            return self.root[name][...]
-        except KeyError as exc:
-            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
-
-    def has(self, name: str) -> bool:
-        try:
-            self.root[name]
-            return True
-        except KeyError:
-            return False
-
-    @property
-    def order(self) -> int:
-        return int(self.attrs["sh_order"])
+    FORMAT, VERSIONS, WHAT, BAKE = TRANSFER_FORMAT, READABLE_VERSIONS, WHAT, "lodprt bake-environment"
 
     def diffuse(self) -> np.ndarray:
         """(V, 3, n*n) diffuse transfer of every vertex; a LOD store's missing vertices are completed (T-15)."""

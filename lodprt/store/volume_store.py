@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
+from lodprt.store.reader import FormatStore
 from lodprt.store.writer import VOLUME_FORMAT, StoreWriter, prepare_destination, store_format
 
 VOLUME_FORMAT_VERSION = 1
@@ -41,57 +42,20 @@ def write_volume_store(path: str | os.PathLike, volume, *, overwrite: bool, tran
     t = np.asarray(transfer, np.float32)
     if t.shape[:4] != volume.shape + (3,):
         raise StoreError(f"{path}: transfer {t.shape} does not fit the volume grid {volume.shape}")
-    writer = StoreWriter(path, overwrite=overwrite, format=VOLUME_FORMAT, what=WHAT)
-    try:
+    with StoreWriter(path, overwrite=overwrite, format=VOLUME_FORMAT, what=WHAT) as writer:
         writer.array("volume/density", volume.density.astype(np.float32))
         writer.attrs("volume", lo=volume.lo.tolist(), hi=volume.hi.tolist(), albedo=volume.albedo.tolist())
         writer.array("transfer/vectors", t)
-        if environment is not None:
-            coefficients, env_attrs = environment
-            writer.array("environment/coefficients", np.asarray(coefficients, np.float64))
-            writer.attrs("environment", **env_attrs)
+        writer.environment(environment)
         writer.attrs(format=VOLUME_FORMAT, format_version=VOLUME_FORMAT_VERSION, lodprt_version=__version__,
                      shape=list(volume.shape), **attrs)
         return writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
 
 
-class VolumeStore:
+class VolumeStore(FormatStore):
     """Read access to a ``lodprt-volume`` store."""
 
-    def __init__(self, path):
-        import zarr
-
-        self.path = Path(path)
-        if not self.path.exists():
-            raise StoreError(f"{self.path}: no such store")
-        if not is_volume_store(self.path):
-            raise StoreError(f"{self.path}: not a lodprt volume store (zarr.json without attribute "
-                             f"format='{VOLUME_FORMAT}'; bake one with lodprt bake-volume)")
-        self.root = zarr.open_group(str(self.path), mode="r")
-        self.attrs = dict(self.root.attrs)
-        if self.attrs.get("format_version") != VOLUME_FORMAT_VERSION:
-            raise StoreError(f"{self.path}: format_version {self.attrs.get('format_version')!r}; this lodprt reads "
-                             f"version {VOLUME_FORMAT_VERSION}")
-
-    def read(self, name: str) -> np.ndarray:
-        try:
-            return self.root[name][...]
-        except KeyError as exc:
-            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
-
-    def has(self, name: str) -> bool:
-        try:
-            self.root[name]
-            return True
-        except KeyError:
-            return False
-
-    @property
-    def order(self) -> int:
-        return int(self.attrs["sh_order"])
+    FORMAT, VERSIONS, WHAT, BAKE = VOLUME_FORMAT, (VOLUME_FORMAT_VERSION,), WHAT, "lodprt bake-volume"
 
     def volume(self):
         """The baked :class:`lodprt.model.volume.Volume` (density, box, albedo)."""

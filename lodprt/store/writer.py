@@ -283,6 +283,24 @@ class StoreWriter:
         _write_owner(self.partial)  # before any zarr file: recognisable from its first moment
         self.root = zarr.open_group(str(self.partial), mode="a", zarr_format=3)
 
+    def __enter__(self) -> "StoreWriter":
+        return self
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        """An exception (Ctrl-C included) inside ``with StoreWriter(...)`` removes the partial folder; after
+        ``commit()`` there is none left to remove."""
+        if kind is not None:
+            self.abort()
+        return False
+
+    def environment(self, environment: tuple | None) -> None:
+        """The lighting a store was baked with, when given: ``(coefficients (3, n*n), {"source", "kind",
+        "resolution"})`` (``Environment.stored``) as ``environment/coefficients`` float64 and its attributes."""
+        if environment is not None:
+            coefficients, attrs = environment
+            self.array("environment/coefficients", np.asarray(coefficients, np.float64))
+            self.attrs("environment", **attrs)
+
     def array(self, name: str, data: np.ndarray, *, chunk_rows: int | None = None) -> None:
         data = np.ascontiguousarray(data)
         chunks = None
