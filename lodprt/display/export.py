@@ -46,14 +46,12 @@ _TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
 
 def check_glb_output(out, overwrite: bool) -> Path:
     """The output path: a .glb in an existing folder, not an existing file unless ``overwrite``."""
+    from lodprt.display.pictures import check_output
+
     out = Path(out)
     if out.suffix.lower() != ".glb":
         raise LodprtError(f"{out}: the output must be a .glb file")
-    if not out.parent.is_dir():
-        raise LodprtError(f"{out}: the folder {out.parent} does not exist")
-    if out.exists() and not overwrite:
-        raise LodprtError(f"{out}: already exists; pass --overwrite to replace it")
-    return out
+    return check_output(out, (".glb",), overwrite=overwrite)  # the folder exists, no file replaced silently
 
 
 def export_frame(store, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
