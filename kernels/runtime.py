@@ -113,6 +113,7 @@ def view_errors(
     exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known
     bound: float,  # In: the error bound (the decision's threshold)
     geo_rate: float,  # In: S-1 units of white per pixel of geometric error
+    area_ref: float,  # In: S-1 pixels a node may cover before its shading term grows with sqrt(area / area_ref)
     alpha: float,  # In: weight of e_geo (T-14)
     basis: wp.array2d(dtype=wp.float32),  # Scratch: (K, >= ncoef); ncoef = 1 (diffuse-only store) or order^2
     culled: wp.array(dtype=wp.uint8),  # Out: (K,) 1 when back-facing (T-13) or outside the frustum
@@ -171,7 +172,10 @@ def view_errors(
     row = node - first_internal
     # S-1 (criterion 0): geometry in pixels at the exchange rate geo_rate, luminance weighted by pixel coverage
     geo_term = g * diag * geo_rate
-    cover = wp.min(1.0, 3.141592653589793 * fp * fp)
+    area = 3.141592653589793 * fp * fp
+    cover = wp.min(1.0, area)
+    if area > area_ref:  # S-1: a large node's squared error summed over its pixels, at most bound^2 area_ref
+        cover = wp.sqrt(area / area_ref)
     e_geo[k] = g
     footprint[k] = fp
     e_lumi[k] = -1.0  # -1: not computed (the decision did not need it; exact = 1 computes every term)

@@ -171,3 +171,58 @@ def force_refine_list(
     result[0] = splits
     result[1] = taken
     result[2] = overflow
+
+
+@wp.kernel
+def retriangulate(
+    moved: wp.array(dtype=wp.int32),  # In: (K,) original vertices whose active ancestor changed since the last call
+    vf_ptr: wp.array(dtype=wp.int32),  # In: (V + 1,) CSR rows of the faces around each original vertex
+    vf: wp.array(dtype=wp.int32),  # In: faces around each vertex (face ids)
+    faces: wp.array2d(dtype=wp.int32),  # In: (F, 3) original faces
+    vertex: wp.array(dtype=wp.int32),  # In: (N,) original vertex of each node
+    anc: wp.array(dtype=wp.int32),  # In: (V,) the cut's active ancestor of every original vertex
+    fmap: wp.array2d(dtype=wp.int32),  # In/out: (F, 3) each face through the active ancestors (T-3.2)
+    slot: wp.array(dtype=wp.int32),  # In/out: (F,) position of the face in ``live``, -1 when degenerate
+    live: wp.array(dtype=wp.int32),  # In/out: (F,) the non-degenerate faces, densely, first ``count[0]``
+    count: wp.array(dtype=wp.int32),  # In/out: (1,) number of live faces
+):
+    """T-3.2 incremental triangulation (one thread): the faces around the ``moved`` vertices are mapped again
+    through the active ancestors; a face that became degenerate leaves the dense list (the last one takes its
+    place), one that stopped being degenerate is appended. The list is the cut's mesh in a deterministic order."""
+    n = count[0]
+    for k in range(moved.shape[0]):
+        v = moved[k]
+        for t in range(vf_ptr[v], vf_ptr[v + 1]):
+            f = vf[t]
+            x = vertex[anc[faces[f, 0]]]
+            y = vertex[anc[faces[f, 1]]]
+            z = vertex[anc[faces[f, 2]]]
+            fmap[f, 0] = x
+            fmap[f, 1] = y
+            fmap[f, 2] = z
+            s = slot[f]
+            if x != y and y != z and x != z:
+                if s < 0:
+                    live[n] = f
+                    slot[f] = n
+                    n += 1
+            elif s >= 0:
+                n -= 1
+                last = live[n]
+                live[s] = last
+                slot[last] = s
+                slot[f] = -1
+    count[0] = n
+
+
+@wp.kernel
+def gather_live(
+    live: wp.array(dtype=wp.int32),  # In: (>= M,) live face ids (``retriangulate``)
+    fmap: wp.array2d(dtype=wp.int32),  # In: (F, 3) mapped faces
+    out: wp.array2d(dtype=wp.int32),  # Out: (M, 3) the live faces' rows, in list order
+):
+    k = wp.tid()
+    f = live[k]
+    out[k, 0] = fmap[f, 0]
+    out[k, 1] = fmap[f, 1]
+    out[k, 2] = fmap[f, 2]

@@ -182,16 +182,30 @@ def test_camera_looking_away_gives_the_coarsest_cut(store):
     np.testing.assert_array_equal(np.flatnonzero(r.cut.active), np.sort(r.h.roots))
 
 
-def test_incremental_equals_from_scratch(store):
-    """Reaching a view incrementally from another view gives the same cut as converging on it from the base."""
+def test_incremental_reaches_a_converged_cut(store):
+    """Reaching a view incrementally from another view gives a converged cut for it: legal, no active node over the
+    bound, every collapse the bound allows blocked by a finer neighbour (the El-Sana & Varshney rule); and it is
+    the cut converged from the base up to such blocks (under 1% of the nodes differ). Cuts are fixed points of the
+    rules, not unique: two collapses blocking each other may stay split on one path and never be split on
+    another."""
     lights = [store.light_positions[4] + np.array([0.01, 0.0, -0.02])]
     inc = Runtime(store, error_bound=0.1)
     converge(inc, orbit_camera(inc, 2.0), lights)
     converge(inc, orbit_camera(inc, 0.5), lights)
+    assert_legal(inc)
+    h, cut = inc.h, inc.cut
+    act = np.flatnonzero(cut.active)
+    inner = act[act >= h.num_vertices]
+    culled, err = inc.node_errors(inner)[:2]
+    assert (culled | (err <= inc.error_bound)).all()
+    par = np.unique(h.parent[act])
+    cand = par[(par >= 0) & cut.active[h.children[np.maximum(par, 0), 0]] & cut.active[h.children[np.maximum(par, 0), 1]]]
+    culled, err = inc.node_errors(cand)[:2]
+    assert all(len(cut.blockers_of_coarsen(int(k))) for k in cand[culled | (err <= inc.error_bound)])
     fresh = Runtime(store, error_bound=0.1)
     converge(fresh, orbit_camera(fresh, 0.5), lights)
-    a, b = np.flatnonzero(inc.cut.active), np.flatnonzero(fresh.cut.active)
-    np.testing.assert_array_equal(a, b)
+    differ = np.count_nonzero(inc.cut.active != fresh.cut.active)
+    assert differ <= 0.01 * len(act), (differ, len(act))
 
 
 def test_culling_is_conservative(store):

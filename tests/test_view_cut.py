@@ -81,7 +81,8 @@ def test_hard_shadow_boundary_is_kept(box_shadow):
     """A mid-grey plane (white set at 2.5 x its radiance, as when something brighter is in view) with a box's hard
     shadow: at the default bound the view cut keeps the shadow boundary (99% of the boundary's pixels within the
     bound of full resolution, the frame within 35 dB) with half the triangles or fewer; T-14 at its defaults
-    smears it (its boundary error at least 4 times larger and over 0.1 of white: the check tells them apart)."""
+    smears it (its mean boundary error at least 3 times larger, its frame 5 dB further from full resolution: the
+    check tells them apart)."""
     from scipy import ndimage
 
     from lodprt.display.compare import frame_error
@@ -103,8 +104,9 @@ def test_hard_shadow_boundary_is_kept(box_shadow):
         assert screen <= bound and numbers["psnr_db"] >= 35.0, (screen, numbers)
         assert len(lod.triangles) < len(full.triangles) / 2
         thesis, full2, _ = frames(box_shadow, cam, white=white, criterion="thesis")
-        _, rel_t, _ = frame_error(r, thesis, full2, white)
-    assert np.percentile(rel_t[edge], 99) > max(4 * screen, 0.1), (screen, np.percentile(rel_t[edge], 99))
+        numbers_t, rel_t, _ = frame_error(r, thesis, full2, white)
+    assert rel_t[edge].mean() > 3 * rel[edge].mean(), (rel[edge].mean(), rel_t[edge].mean())
+    assert numbers_t["psnr_db"] < numbers["psnr_db"] - 5, (numbers, numbers_t)
 
 
 def test_plain_lit_plane_coarsens_to_its_base(tmp_path):

@@ -27,7 +27,10 @@ def criterion_error(rt, culled, e_geo, e_lumi, footprint, e_detail) -> np.ndarra
         cam = rt.camera
         g_px = e_geo * math.hypot(cam.width, cam.height)
         geo_term = g_px * rt.geo_rate()
-        err = np.maximum(geo_term, e_detail * np.minimum(1.0, np.pi * footprint ** 2))
+        area = np.pi * footprint ** 2
+        ref = rt.area_ref()
+        cover = np.where(area > ref, np.sqrt(area / ref), np.minimum(1.0, area))
+        err = np.maximum(geo_term, e_detail * cover)
     return np.where(culled, 0.0, err)
 
 def node_errors_reference(rt, nodes) -> NodeErrors:

@@ -23,12 +23,12 @@ import typing
 import numpy as np
 
 from lodprt.errors import LodprtError
-from lodprt.model.hierarchy import concat_ranges, map_faces
 from lodprt.runtime import node_bounds
 from lodprt.runtime.camera import Camera, as_camera, clip_planes, view_projection
 from lodprt.runtime.frames import Frame, StoreFrames
 from lodprt.runtime.lights import LightInterpolator, check_lights
 from lodprt.runtime.samples import SampleCache, default_white
+from lodprt.runtime.triangulation import IncrementalTriangulation
 from lodprt.runtime.view_cut import Cut
 
 log = logging.getLogger(__name__)
@@ -50,10 +50,14 @@ BACKOFF_EDGES = 20_000
 #: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
 CRITERIA = ("screen", "thesis")
 #: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
-DEFAULT_ERROR_BOUND = {"screen": 0.2, "thesis": 0.25}
+DEFAULT_ERROR_BOUND = {"screen": 0.7, "thesis": 0.25}
 #: "screen": the geometric error on screen, pixels, that weighs as much as the default bound (the exchange rate
 #: between pixels of displacement and units of white: 1 px = 0.2 of white at the default)
 PIXEL_TOLERANCE = 1.0
+#: "screen": the share of the screen a node may cover at the bound's per-pixel error; a larger node's shading term
+#: grows with sqrt(area / (AREA_SHARE W H)), so its squared error summed over its pixels stays under
+#: bound^2 AREA_SHARE W H (S-1): its share of the frame's mean squared error does not depend on the resolution
+AREA_SHARE = 1.0 / 8192
 
 
 class NodeErrors(typing.NamedTuple):
@@ -91,7 +95,7 @@ class Runtime:
 
     def __init__(self, store, *, error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
                  pixel_tolerance: float = PIXEL_TOLERANCE, triangle_budget: int | None = None,
-                 white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 2,
+                 white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 1,
                  lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None):
         from lodprt.devices import resolve_device
 
@@ -110,6 +114,7 @@ class Runtime:
         self.faces = np.asarray(store.faces, np.int64)
         self.positions = np.asarray(store.positions, np.float64)
         self.normals = np.asarray(store.normals, np.float64)
+        self._pos32, self._nrm32 = self.positions.astype(np.float32), self.normals.astype(np.float32)  # frames
         self.bounds = np.array([self.positions.min(0), self.positions.max(0)]) if len(self.positions) else np.zeros((2, 3))
         self.set_error_bound(error_bound, alpha)
         if triangle_budget is not None and int(triangle_budget) < 1:
@@ -148,12 +153,7 @@ class Runtime:
         lr = h.leaf_range
         self._subtree_edges = self.cut.edge_offsets[lr[:, 1]] - self.cut.edge_offsets[lr[:, 0]]
         self._retry_at = np.zeros(h.num_nodes, np.int64)
-        # faces around each original vertex (CSR), for the incremental triangulation
-        fv = self.faces.ravel()
-        order = np.argsort(fv, kind="stable")
-        self._vf = (order // 3).astype(np.int64)
-        self._vf_ptr = np.searchsorted(fv[order], np.arange(V + 1))
-        self._tri_anc = None
+        self._tri = IncrementalTriangulation(h, self.faces, self.device)  # T-3.2, what changed only
         self._dirty, self._settled = True, False
         self._frame = 0  # errors cached per frame: culled, error and the frame they belong to
         self._culled = np.zeros(h.num_nodes, bool)
@@ -356,7 +356,7 @@ class Runtime:
         wp, dev, d = self._wp, self.device, self._d
         nodes = np.asarray(nodes, np.int32)
         K = len(nodes)
-        outs = [wp.zeros(K, dtype=wp.uint8, device=dev)] + [wp.zeros(K, dtype=wp.float32, device=dev) for _ in range(5)]
+        outs = [wp.empty(K, dtype=wp.uint8, device=dev)] + [wp.empty(K, dtype=wp.float32, device=dev) for _ in range(5)]
         if K:
             cam = self.camera
             used, weights = self._frame_inputs()
@@ -368,7 +368,7 @@ class Runtime:
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
                 *bounds, CRITERIA.index(self.criterion), int(bool(exact)),
-                float(self.error_bound), self.geo_rate(), self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
+                float(self.error_bound), self.geo_rate(), self.area_ref(), self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
         culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
         return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))
@@ -376,6 +376,10 @@ class Runtime:
     def geo_rate(self) -> float:
         """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance)."""
         return DEFAULT_ERROR_BOUND["screen"] / self.pixel_tolerance
+
+    def area_ref(self) -> float:
+        """S-1: the pixels a node may cover before its shading term grows (AREA_SHARE of the screen)."""
+        return AREA_SHARE * self.camera.width * self.camera.height
 
     def focal_px(self) -> float:
         """Focal length of the camera in pixels: (height / 2) / tan(fov / 2)."""
@@ -470,7 +474,7 @@ class Runtime:
         vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
         lut = np.full(h.num_vertices, -1, np.int32)
         lut[vid] = np.arange(len(vid), dtype=np.int32)
-        tri = lut[self._triangles()]
+        tri = lut[self._tri.faces(self.cut.anc)]
         t2 = time.perf_counter()
         coef, rad = self._relight(vid)
         t3 = time.perf_counter()
@@ -497,8 +501,8 @@ class Runtime:
             "ms_relight": 1e3 * (t3 - t2),
             "ms_total": 1e3 * (t3 - t0),
         }
-        return Frame(vertex_ids=vid, positions=self.positions[vid].astype(np.float32),
-                     normals=self.normals[vid].astype(np.float32), triangles=tri.astype(np.int32),
+        return Frame(vertex_ids=vid, positions=self._pos32[vid],
+                     normals=self._nrm32[vid], triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats)
 
@@ -518,22 +522,6 @@ class Runtime:
                 wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"],
                 wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)], [coef, rad])
         return coef.numpy(), rad.numpy()
-
-    def _triangles(self) -> np.ndarray:
-        """The cut's triangles in original vertex ids (T-3.2 triangulation), kept up to date incrementally: only
-        the original faces around vertices whose active ancestor changed since the last frame are mapped again."""
-        anc = self.cut.anc
-        if self._tri_anc is None:
-            self._fmap, self._flive = map_faces(self.h, self.faces, anc)
-        else:
-            moved = np.flatnonzero(anc != self._tri_anc)
-            if len(moved):
-                mark = np.zeros(len(self.faces), bool)  # faces around the moved vertices (a mask: no sort)
-                mark[self._vf[concat_ranges(self._vf_ptr[moved], self._vf_ptr[moved + 1])]] = True
-                fs = np.flatnonzero(mark)
-                self._fmap[fs], self._flive[fs] = map_faces(self.h, self.faces[fs], anc)
-        self._tri_anc = anc.copy()
-        return self._fmap[np.flatnonzero(self._flive)]  # an index gather: cheaper than a 2-D boolean mask
 
     # -- full resolution ---------------------------------------------------------------------------------------
     def coefficients(self, vertex_ids=None) -> np.ndarray:

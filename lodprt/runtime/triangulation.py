@@ -1,0 +1,56 @@
+"""The cut's mesh, kept up to date incrementally (T-3.2; ``lodprt.kernels.view_cut.retriangulate``): each frame
+only the original faces around vertices whose active ancestor changed are mapped again, and the non-degenerate
+faces are kept as a dense list, so a frame's triangulation costs what changed (and one numpy comparison per
+vertex to find it) instead of a pass over every original face. ``lodprt.model.hierarchy.triangulate`` is the reference (the same
+faces, in another order)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lodprt.devices import warp
+from lodprt.model.hierarchy import Hierarchy
+
+
+class IncrementalTriangulation:
+    """The faces of a mesh mapped through a cut's active ancestors, updated by ``faces(anc)`` each frame.
+
+    h: the hierarchy; faces (F, 3) original vertex ids; device: the Warp device of the kernel (on the CPU its
+    state aliases numpy arrays; elsewhere it stays on the device and ``anc`` is copied over per call)."""
+
+    def __init__(self, h: Hierarchy, faces: np.ndarray, device: str = "cpu"):
+        wp = warp()
+        self.device = device
+        faces = np.ascontiguousarray(faces, np.int32).reshape(-1, 3)
+        V, F = h.num_vertices, len(faces)
+        fv = faces.ravel()
+        order = np.argsort(fv, kind="stable")  # faces around each original vertex (CSR)
+        ptr = np.searchsorted(fv[order], np.arange(V + 1)).astype(np.int32)
+        i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device)  # noqa: E731
+        self._in = [i32(ptr), i32(order // 3), wp.array(faces, dtype=wp.int32, ndim=2, device=device),
+                    i32(h.vertex)]
+        self._seen = np.full(V, -1, np.int32)  # anc at the last call (-1: never)
+        self._state = [wp.zeros((F, 3), dtype=wp.int32, device=device),
+                       wp.full(F, -1, dtype=wp.int32, device=device),
+                       wp.zeros(F, dtype=wp.int32, device=device), wp.zeros(1, dtype=wp.int32, device=device)]
+
+    def faces(self, anc: np.ndarray) -> np.ndarray:
+        """(M, 3) int32 original vertex ids of the non-degenerate faces for the active ancestors ``anc`` (V,)."""
+        from lodprt.kernels import view_cut as kv
+
+        wp = warp()
+        anc = np.ascontiguousarray(anc, np.int32)
+        moved = np.flatnonzero(anc != self._seen).astype(np.int32)
+        fmap, slot, live, count = self._state
+        if len(moved):
+            self._seen[moved] = anc[moved]
+            a = wp.array(anc, dtype=wp.int32, device=self.device, copy=self.device != "cpu")
+            wp.launch(kv.retriangulate, dim=1, inputs=[wp.array(moved, dtype=wp.int32, device=self.device),
+                                                       *self._in, a, *self._state], device=self.device)
+        n = int(count.numpy()[0])
+        if self.device == "cpu":  # the state is host memory: a numpy gather
+            return fmap.numpy()[live.numpy()[:n]]
+        out = wp.empty((n, 3), dtype=wp.int32, device=self.device)
+        if n:  # gathered where the state lives: only the cut's faces come back from the device
+            wp.launch(kv.gather_live, dim=n, inputs=[live, fmap], outputs=[out], device=self.device)
+        return out.numpy()

@@ -1,0 +1,58 @@
+"""The run time's incremental triangulation (``lodprt.runtime.triangulation``, kernels ``retriangulate`` and
+``gather_live``) against the vectorised reference ``lodprt.model.hierarchy.triangulate`` (T-3.2): after every cut
+change, from the base up to the full mesh and back, the same set of faces."""
+
+import numpy as np
+import pytest
+
+from lodprt.model.hierarchy import triangulate
+from lodprt.runtime.triangulation import IncrementalTriangulation
+from lodprt.runtime.view_cut import Cut
+
+pytestmark = pytest.mark.warp_debug
+
+
+def rows(tri: np.ndarray) -> np.ndarray:
+    """Faces as a sorted array of rows (each rotated to start at its smallest id, orientation kept)."""
+    tri = np.asarray(tri, np.int64).reshape(-1, 3)
+    k = np.argmin(tri, axis=1)
+    rot = np.stack([tri[np.arange(len(tri)), (k + i) % 3] for i in range(3)], 1)
+    return rot[np.lexsort(rot.T[::-1])]
+
+
+def test_incremental_faces_match_the_reference(bunny_floor, bunny_hierarchy, device):
+    """Random forced splits and collapses, several cut moves between calls, an unchanged call, LOD off (every leaf)
+    and back to the base: every call gives exactly ``triangulate``'s faces (same orientation, no duplicates)."""
+    h, faces = bunny_hierarchy, bunny_floor.faces
+    tri = IncrementalTriangulation(h, faces, device)
+    rng = np.random.default_rng(3)
+    cut = Cut.base(h, faces)
+    for step in range(8):
+        got = tri.faces(cut.anc)
+        np.testing.assert_array_equal(rows(got), rows(triangulate(h, faces, cut.anc)))
+        if step == 3:  # nothing moved: the same faces again
+            np.testing.assert_array_equal(rows(tri.faces(cut.anc)), rows(got))
+        act = np.flatnonzero(cut.active)
+        inner = act[act >= h.num_vertices]
+        cut.force_refine_list(rng.permutation(inner)[: max(len(inner) // 4, 1)], device="cpu")
+        par = np.unique(h.parent[np.flatnonzero(cut.active)])
+        cut.coarsen_list(rng.permutation(par[par >= 0])[:200], device="cpu")
+    full = Cut.full(h, faces)
+    np.testing.assert_array_equal(rows(tri.faces(full.anc)), rows(faces))
+    base = Cut.base(h, faces)
+    np.testing.assert_array_equal(rows(tri.faces(base.anc)), rows(triangulate(h, faces, base.anc)))
+
+
+def test_gather_live_kernel(device):
+    """``gather_live`` (the device-side gather of the live faces) returns the rows of the listed faces in order."""
+    from lodprt.devices import warp
+    from lodprt.kernels import view_cut as kv
+
+    wp = warp()
+    fmap = np.arange(30, dtype=np.int32).reshape(10, 3)
+    live = np.array([7, 2, 9, 0, 5, 5], np.int32)  # the list is longer than the live count (4)
+    out = wp.empty((4, 3), dtype=wp.int32, device=device)
+    wp.launch(kv.gather_live, dim=4, inputs=[wp.array(live, dtype=wp.int32, device=device),
+                                             wp.array(fmap, dtype=wp.int32, ndim=2, device=device)],
+              outputs=[out], device=device)
+    np.testing.assert_array_equal(out.numpy(), fmap[live[:4]])
