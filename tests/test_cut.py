@@ -5,7 +5,7 @@ import pytest
 
 from lodprt.precompute.bake import bake
 from lodprt.precompute.baker import Baker, load_kernels
-from lodprt.model.completion import RULE_T15, CompletionPlan, ring_weights
+from lodprt.model.completion import RULE_BOUNDARY, RULE_T15, CompletionPlan, ring_weights
 from lodprt.precompute.light_cut import LightCut
 from lodprt.model.hierarchy import active_ancestors
 from lodprt.model.hierarchy_build import build_hierarchy
@@ -102,7 +102,8 @@ def test_cut_bake_coefficients_identical_to_full(tmp_path, device, bunny_floor, 
 
 
 def test_completion_of_constant_and_linear_fields(bunny_floor, bunny_hierarchy):
-    """Equal neighbour coefficients complete to exactly those; on the flat floor a linear field is reproduced."""
+    """Equal neighbour coefficients complete to exactly those; on the flat floor a linear field is reproduced,
+    on its rim too (the build collapses rim vertices along the rim: the boundary rule)."""
     from lodprt.runtime.view_cut import Cut
 
     h = bunny_hierarchy
@@ -141,3 +142,22 @@ def test_ring_weights_linear_precision_and_degenerate_rings():
     w, _, _ = ring_weights(np.zeros((1, 3)), np.array([[[1.0, 0, 0], [0, 0, 0]]]), np.array([[True, False]]),
                            np.array([[0, 0, 1.0]]))
     np.testing.assert_allclose(w, [[1.0, 0.0]])
+
+
+def test_ring_weights_boundary_rule_on_open_rings():
+    """A vertex on a straight open boundary (its ring a half fan, a gap of 180 degrees) takes the boundary rule and
+    reproduces p from the two neighbours along the boundary; at a convex bend of the boundary (a gap over 180
+    degrees) the weights stay positive and complete to p's closest point on the segment between them."""
+    ang = np.array([0.0, 0.6, 1.5, 2.4, np.pi])
+    ring = np.c_[np.cos(ang), np.sin(ang), np.zeros(5)] * [[1.0], [0.7], [1.3], [0.8], [2.0]]
+    up = np.array([[0, 0, 1.0]])
+    w, order, rule = ring_weights(np.zeros((1, 3)), ring[None], np.ones((1, 5), bool), up)
+    assert rule[0] == RULE_BOUNDARY
+    np.testing.assert_allclose(w[0] @ ring[order[0]], 0.0, atol=1e-14)
+    bent = ring.copy()
+    bent[4] = [-1.0, 0.3, 0.0]
+    w, order, rule = ring_weights(np.zeros((1, 3)), bent[None], np.ones((1, 5), bool), up)
+    assert rule[0] == RULE_BOUNDARY and (w >= 0).all() and w.sum() == pytest.approx(1.0)
+    a, b = bent[0], bent[4]
+    t = -a @ (b - a) / ((b - a) @ (b - a))
+    np.testing.assert_allclose(w[0] @ bent[order[0]], a + t * (b - a), atol=1e-14)

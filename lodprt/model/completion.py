@@ -12,6 +12,10 @@ They have linear precision on convex rings. Where the ring is degenerate for the
 boundary ring, coincident or collinear points, obtuse angles making a weight <= 0), a documented, bounded rule
 takes over, in this order:
 
+    boundary    on an open ring (a gap of at least 180 degrees between neighbours sorted around p: a vertex of an
+                open boundary, which ``build_hierarchy`` collapses along the boundary by default), p is
+                interpolated along the segment between the two neighbours on either side of the gap (weights
+                1 - t and t, t the clamped projection of p on it): linear precision along a straight boundary
     mean value  w_j = (tan(alpha_j-1 / 2) + tan(alpha_j / 2)) / |p - q_j|  (Floater; alpha_j the angle at p between
                 q_j and q_j+1; positive and linearly precise on star-shaped rings)
     Shepard     w_j = 1 / max(|p - q_j|, tiny)^2  (always positive; a single neighbour is copied)
@@ -28,10 +32,12 @@ import numpy as np
 
 from lodprt.model.hierarchy import Hierarchy
 
-RULE_T15, RULE_MEAN_VALUE, RULE_SHEPARD = 0, 1, 2
+RULE_T15, RULE_MEAN_VALUE, RULE_SHEPARD, RULE_BOUNDARY = 0, 1, 2, 3
 #: rows of rings weighed at once (memory is CHUNK x the chunk's largest ring)
 CHUNK = 8192
-RULE_NAMES = ("T-15 cotangent", "mean value", "Shepard")
+RULE_NAMES = ("T-15 cotangent", "mean value", "Shepard", "boundary")
+#: an angular gap in a sorted ring at least this close to 180 degrees (radians) makes it an open boundary ring
+GAP_SLACK = 1e-6
 
 
 def _cot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -39,6 +45,27 @@ def _cot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     cross = np.linalg.norm(np.cross(a, b), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         return (a * b).sum(-1) / cross
+
+
+def _boundary_weights(ang, d, nxt, mask, n_real):
+    """The boundary rule (module docstring) for rings sorted by angle ``ang`` (M, R) (inf on the padding), offsets
+    ``d = q - p`` (M, R, 3) in that order: weights (M, R) and which rings are open (a gap >= 180 degrees, at least
+    2 neighbours)."""
+    M, R = ang.shape
+    two_pi = 2 * np.pi
+    with np.errstate(invalid="ignore"):
+        gap = np.where(mask, np.mod(np.take_along_axis(ang, nxt, axis=1) - ang, two_pi), -1.0)
+    a = np.argmax(gap, axis=1)
+    open_ring = (n_real >= 2) & (gap[np.arange(M), a] >= np.pi - GAP_SLACK)
+    b = nxt[np.arange(M), a]
+    da, db = d[np.arange(M), a], d[np.arange(M), b]
+    seg = db - da
+    L2 = (seg * seg).sum(1)
+    t = np.clip(np.divide(-(da * seg).sum(1), L2, out=np.full(M, 0.5), where=L2 > 0), 0.0, 1.0)
+    w = np.zeros((M, R))
+    w[np.arange(M), a] = 1.0 - t
+    w[np.arange(M), b] += t
+    return w, open_ring
 
 
 def ring_weights(p: np.ndarray, ring: np.ndarray, mask: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -64,6 +91,7 @@ def ring_weights(p: np.ndarray, ring: np.ndarray, mask: np.ndarray, normal: np.n
     j = np.arange(R)[None, :]
     nxt = np.where(j + 1 < n_real[:, None], j + 1, 0)
     prv = np.where(j > 0, j - 1, np.maximum(n_real[:, None] - 1, 0))
+    w_bd, open_ring = _boundary_weights(np.take_along_axis(ang, order, axis=1), d, nxt, mask, n_real)
     d_next = np.take_along_axis(d, nxt[:, :, None], axis=1)
     d_prev = np.take_along_axis(d, prv[:, :, None], axis=1)
     # area-weighted normal of the fan (p, q_j, q_j+1), and projection onto its plane
@@ -98,6 +126,8 @@ def ring_weights(p: np.ndarray, ring: np.ndarray, mask: np.ndarray, normal: np.n
     mv_ok = ok(w_mv)
     rule[mv_ok] = RULE_MEAN_VALUE
     w[mv_ok] = np.where(mask[mv_ok], w_mv[mv_ok], 0.0)
+    rule[open_ring] = RULE_BOUNDARY
+    w[open_ring] = w_bd[open_ring]
     t_ok = ok(w_t15)
     rule[t_ok] = RULE_T15
     w[t_ok] = np.where(mask[t_ok], w_t15[t_ok], 0.0)
@@ -151,7 +181,7 @@ class CompletionPlan:
         self.wave_ptr = np.searchsorted(self.wave[self.by_wave], np.arange(self.wave.max() + 2 if M else 1))
 
     def rule_fractions(self) -> dict[str, float]:
-        counts = np.bincount(self.rule, minlength=3) / max(len(self.rule), 1)
+        counts = np.bincount(self.rule, minlength=len(RULE_NAMES)) / max(len(self.rule), 1)
         return {name: float(c) for name, c in zip(RULE_NAMES, counts)}
 
     def complete(self, ids: np.ndarray, coeffs: np.ndarray, num_vertices: int, *, cut_nodes=None, dark=None) -> np.ndarray:

@@ -31,9 +31,10 @@ log = logging.getLogger(__name__)
 BOUNDARY_WEIGHT = 100.0
 #: slack (radians) added to every stored cone half-angle to cover float32 rounding of axis and angle
 CONE_SLACK = 1e-6
-#: the build stops after a round that made fewer collapses than this fraction of the vertices that may collapse
-MIN_ROUND = 2e-4
-#: the build stops after this many rounds without a single collapse being possible anywhere
+#: the build stops after a round that made fewer collapses than this fraction of the vertices that may still
+#: collapse (the tail: a round costs what the live mesh costs, for next to nothing)
+MIN_ROUND = 1e-2
+#: the build stops after at most this many rounds (a bound only: it stops long before, docs/HIERARCHY.md)
 MAX_ROUNDS = 2000
 
 
@@ -192,14 +193,17 @@ class _Nodes:
 
 
 def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, total) -> int:
-    """Rounds of collapses until every group is at its base size or nothing can collapse; returns the rounds."""
+    """Rounds of collapses (rule H-R) until every group is at its base size, a round makes no collapse (then no
+    movable vertex has a legal move: ``CollapseRounds.select``) or only the tail is left (``MIN_ROUND``); returns
+    the rounds."""
     cur = {"axis": normals[st.gid].copy(), "half": np.zeros(st.n), "radius": np.zeros(st.n),
            "height": np.zeros(st.n, np.int32)}
     rounds = 0
     size = st.n
     for _ in range(MAX_ROUNDS):
         st.finish_groups(target_base)
-        if not st.movable.any():
+        movable = np.count_nonzero(st.movable)
+        if not movable:
             break
         if st.n > 64 and (st.n - np.count_nonzero(np.bincount(st.faces.ravel(), minlength=st.n))) * 2 > size:
             cur = st.compact(cur)
@@ -214,7 +218,7 @@ def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, t
         tris, tri_count = st.apply(v, u)
         nodes.add(st, cur, v, u, nb_count, nb, tris, tri_count)
         rounds += 1
-        if len(v) < MIN_ROUND * total:  # the tail: a whole round over the mesh for next to nothing
+        if len(v) < MIN_ROUND * movable:  # the tail: a whole round over the live mesh for next to nothing
             break
         log.debug("hierarchy round %d: %d collapses, %d faces left", rounds, len(v), len(st.faces))
         if progress is not None:
@@ -229,7 +233,7 @@ def build_hierarchy(
     *,
     component: np.ndarray | None = None,
     target_base: int = 64,
-    keep_boundary: bool = True,
+    keep_boundary: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> Hierarchy:
     """Build the binary vertex hierarchy of a triangle mesh (module docstring, docs/HIERARCHY.md).
@@ -238,7 +242,9 @@ def build_hierarchy(
     component (V,) int: vertices of different components never collapse into each other (e.g. ``Scene.object_id``:
     the floor and each object); connected components are always built independently (each to its own base).
     target_base: a group stops collapsing once it has at most this many faces (the base mesh is larger where
-    collapses are refused); keep_boundary: boundary vertices never collapse (the floor keeps its rim);
+    collapses are refused); keep_boundary: boundary vertices never collapse (the floor keeps its rim); by default
+    they collapse along boundary edges, and the boundary planes of their quadrics keep straight outlines and
+    their corners (docs/HIERARCHY.md);
     ``progress(done, total)`` reports collapses made against the number of vertices that may collapse. Open
     boundaries, several components, non-manifold edges, duplicated vertices and faces with a repeated corner are
     accepted; unreferenced vertices become isolated roots. Raises LodprtError naming the bad input otherwise.

@@ -3,13 +3,17 @@
 
 A round looks at the whole current mesh at once, vectorised (numpy, no per-vertex Python objects): every movable
 vertex ``v`` proposes its cheapest move ``v -> u`` (Garland-Heckbert QEM cost of ``u``'s position under the summed
-quadrics, plus ``EDGE_WEIGHT |uv|^4``); the proposals that are local minima of the cost among all proposals within
-two edges are checked for legality (link condition, valence, boundary rules, fold-over, slivers: docs/HIERARCHY.md)
-and made together; what failed tries its next-cheapest move, and the selection repeats on what the made collapses
-left unblocked (a Luby-style maximal independent set). Two collapses made in one round never touch each other's
-collapsed vertex's faces or either one-ring their legality reads (``CollapseRounds.select``), so they commute
-(H-R): each was legal on the mesh the other leaves, and any order of the round's collapses is a valid build order. The vertex arrays are compacted to the live
-vertices whenever half of them have gone, so late rounds cost what the small mesh costs.
+quadrics, plus ``EDGE_WEIGHT |uv|^4``); proposals are ranked by cost class (``cost_class``: within a factor
+``CLASS_STEP``), then by a hash of the position; the proposals that are local minima of that rank among all live
+proposals within two edges are checked for legality (link condition, valence, boundary rules, fold-over, slivers:
+docs/HIERARCHY.md) and made together. A proposal found illegal checks all its vertex's other moves at once and
+competes again with the cheapest legal one; proposals conflicting with a made collapse, or with a waiting proposal
+of a cheaper class, wait for the next round; the selection repeats until no proposal is live (a Luby-style maximal
+independent set within each cost class). Two collapses made in one round never touch each other's collapsed
+vertex's faces or either one-ring their legality reads (``CollapseRounds.select``), so they commute (H-R): each was
+legal on the mesh the other leaves, and any order of the round's collapses is a valid build order. The vertex
+arrays are compacted to the live vertices whenever half of them have gone, so late rounds cost what the small mesh
+costs.
 """
 
 from __future__ import annotations
@@ -26,12 +30,10 @@ SLIVER = 1e-3
 EDGE_WEIGHT = 1e-3
 #: no collapse may leave the survivor with more neighbours (keeps fans and deep chains from forming)
 MAX_VALENCE = 24
-#: rounds of selection (local minima, legality, blocking) within one round of collapses
-SELECTIONS = 4
+#: moves whose costs lie within one power of CLASS_STEP are ranked by position hash, not by cost (``cost_class``)
+CLASS_STEP = 2.0
 #: moves costed at once (bounds the temporaries of a round to a few MB)
 CHUNK = 1 << 16
-#: moves a vertex tries in one round (cheapest first) before it waits for the next round
-TRIES = 3
 
 # the 10 entries of a symmetric 4 x 4 quadric (row, column), upper triangle
 QUADRIC_ENTRIES = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
@@ -61,12 +63,40 @@ def position_hash(p: np.ndarray) -> np.ndarray:
     return h
 
 
+def cost_class(cost: np.ndarray) -> np.ndarray:
+    """The priority class of each move's cost: ``floor(log_CLASS_STEP cost)`` (-inf for costs <= 0, which float
+    rounding of a zero QEM error can give). Within a class the position hash orders the moves (a random-like order,
+    so a round's local minima are dense, not a crawl along a smooth cost field); across classes the cheaper class
+    goes first (rule H-R: selection; docs/HIERARCHY.md)."""
+    with np.errstate(divide="ignore"):
+        return np.floor(np.log(np.maximum(cost, 0.0)) / np.log(CLASS_STEP))
+
+
+def rank_key(cls: np.ndarray, tie: np.ndarray) -> np.ndarray:
+    """(K,) uint64 sort keys ordering moves by cost class (``cost_class``), then by the position hash ``tie``:
+    the class in the top 16 bits (clipped to +-2^15, far beyond the classes float64 costs have), the hash's top 48
+    bits below it (one stable sort instead of a two-key lexsort; equal keys, e.g. duplicated vertices, keep the
+    order of their local ids, which is the same whichever other groups are built alongside)."""
+    c = (np.clip(cls, -(2**15) + 1, 2**15 - 1) + 2**15).astype(np.uint64)
+    return (c << np.uint64(48)) | (tie >> np.uint64(16))
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross products of (K, 3) arrays (``np.cross`` without its generic set-up)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
 class CollapseRounds:
     """The mutable mesh of the build and its rounds of collapses (module docstring).
 
     Per live vertex (local ids ``0..n-1``, compacted now and then): ``gid`` original id, ``pos`` (n, 3) float64,
-    ``quadric`` (n, 10) float64 (``QUADRIC_ENTRIES``), ``boundary``, ``frozen`` (never a target), ``movable`` (may collapse), ``group``,
-    ``node`` the hierarchy node standing there. Faces ``faces`` (M, 3) int32 in local ids, never degenerate."""
+    ``quadric`` (n, 10) float64 (``QUADRIC_ENTRIES``), ``boundary``, ``frozen`` (never a target), ``movable`` (may
+    collapse), ``group``, ``node`` the hierarchy node standing there. Faces ``faces`` (M, 3) int32 in local ids,
+    never degenerate."""
 
     def __init__(self, gid, pos, quadric, boundary, frozen, movable, group, faces, split: bool):
         self.split = split  # whether vertices of different groups may share an edge
@@ -161,10 +191,20 @@ class CollapseRounds:
         return best, m
 
     # -----------------------------------------------------------------------------------------------------------
-    def legal(self, v, u, e, dst, count, start, keys):
-        """(K,) bool: which collapses ``v -> u`` (local ids; ``e`` their edge indices) are legal on the current
-        mesh (docs/HIERARCHY.md): link condition, the survivor's valence, no fold-over (thesis figure 6), no
-        sliver. The boundary and component rules hold already for every proposal."""
+    def corners(self):
+        """The face corners around each vertex: CSR start (n + 1,) int64 and flat corner indices (3M,) int32
+        (``faces.ravel()`` positions: face ``c // 3``, corner ``c % 3``), grouped by vertex."""
+        flat = self.faces.ravel()
+        at = np.argsort(flat).astype(np.int32)
+        fstart = np.zeros(self.n + 1, np.int64)
+        np.cumsum(np.bincount(flat, minlength=self.n), out=fstart[1:])
+        return fstart, at
+
+    def legal(self, v, u, e, dst, count, start, keys, around):
+        """(K,) bool: which collapses ``v -> u`` (local ids; ``e`` their edge indices; ``around`` the face
+        corners of ``corners()``) are legal on the current mesh (docs/HIERARCHY.md): link condition, the
+        survivor's valence, no fold-over (thesis figure 6), no sliver. The boundary and component rules hold
+        already for every proposal. A vertex may appear in several rows (one per move checked)."""
         n = self.n
         K = len(v)
         deg_v = start[v + 1] - start[v]
@@ -179,12 +219,11 @@ class CollapseRounds:
         after = deg_u + deg_v - common - 2
         ok = (common == count[e]) & (after <= MAX_VALENCE) & (after >= np.where(self.boundary[u], 2, 3))
         # fold-over and slivers on every face that moves (the faces around v without u)
-        slot = np.full(n, -1, np.int64)
-        slot[v] = np.arange(K)
-        flat = self.faces.ravel()
-        ci = np.flatnonzero(slot[flat] >= 0)
+        fstart, corner = around
+        lo, hi = fstart[v], fstart[v + 1]
+        ci = corner[concat_ranges(lo, hi)]
+        r = np.repeat(np.arange(K), hi - lo)
         f, j = ci // 3, ci % 3
-        r = slot[flat[ci]]
         b = self.faces[f, (j + 1) % 3]
         c = self.faces[f, (j + 2) % 3]
         uu = u[r]
@@ -192,9 +231,9 @@ class CollapseRounds:
         r, b, c, uu, vv = r[moved], b[moved], c[moved], uu[moved], v[r[moved]]
         P = self.pos
         pb, pc = P[b], P[c]
-        old = np.cross(pb - P[vv], pc - P[vv])
+        old = cross(pb - P[vv], pc - P[vv])
         e1, e2 = pb - P[uu], pc - P[uu]
-        new = np.cross(e1, e2)
+        new = cross(e1, e2)
         n2 = (new * new).sum(1)
         o2 = (old * old).sum(1)
         fold = (old * new).sum(1) <= FOLD_COS * np.sqrt(n2 * o2)
@@ -203,77 +242,120 @@ class CollapseRounds:
         bad = np.bincount(r, weights=fold | sliver, minlength=K) > 0
         return ok & ~bad
 
+    def next_legal(self, bad, cost, seg_start, seg_of_v, moves, src, dst, count, start, keys, around):
+        """For the vertices ``bad`` whose proposal was illegal (its cost already set to inf): every other move
+        of theirs is checked at once (``legal``, on the round's mesh), illegal ones get cost inf, and the cheapest
+        legal one is returned (move index, -1 when none is left) with its cost. A vertex thus reaches a legal
+        move in the round its cheaper moves fail, however many they are (rule H-R: selection)."""
+        sb = seg_of_v[bad]
+        idx = concat_ranges(seg_start[sb], seg_start[sb + 1])
+        idx = idx[np.isfinite(cost[idx])]
+        if len(idx):
+            e = moves[idx]
+            ok = self.legal(src[e], dst[e], e, dst, count, start, keys, around)
+            cost[idx[~ok]] = np.inf
+        return self.cheapest(cost, seg_start, sb)
+
     def select(self, src, dst, count, start, keys):
         """This round's collapses: (v, u) local ids (C,) of pairwise independent legal moves, in the order of
-        their costs (module docstring: local minima, legality, blocking, repeated ``SELECTIONS`` times).
+        their costs (rule H-R; module docstring).
 
         Two collapses ``v -> u`` and ``v' -> u'`` conflict when ``v'`` is in the closed one-ring of ``v`` or of
         ``u``, or ``u'`` is in the closed one-ring of ``v`` (or the same with the roles swapped): otherwise
         neither changes the faces around the other's ``v``, nor the one-rings of its ``v`` and ``u``, so both
-        stay legal in either order and commute (H-R). A proposal is taken when its rank is the lowest among all
-        live proposals it conflicts with."""
+        stay legal in either order and commute. In each selection, a live proposal is taken when its rank (cost
+        class, then position hash) is the lowest among the live proposals it conflicts with and no waiting
+        proposal it conflicts with has a cheaper class. A taken proposal that is illegal moves to its vertex's
+        cheapest legal move (``next_legal``) and competes again at that cost: it never holds its neighbours back
+        with a cost it cannot realise, and needs no second round to reach a legal move. Every live proposal
+        conflicting with any collapse made so far in the round leaves it (whatever its current target): the
+        round's collapses are pairwise non-conflicting. Selections repeat until no proposal is live, so a round
+        makes no collapse only when no movable vertex has a legal move."""
         n = self.n
         moves, cost, seg_start, seg_v = self.proposals(src, dst, count, start)
         S = len(seg_v)
         if not S:
             return np.zeros(0, np.int32), np.zeros(0, np.int32)
         best, own = self.cheapest(cost, seg_start, np.arange(S))
-        tries = np.zeros(S, np.int32)
-        big = np.iinfo(np.int32).max
-        # priority: own cost, then a hash of the position (exact ties, common on flat regions, broken without
-        # the bias of vertex order, which would make the selection crawl across a grid): a rank per vertex
-        rank = np.full(n, big, np.int32)
-        rank[seg_v[np.lexsort((self.tie[seg_v], own))]] = np.arange(S, dtype=np.int32)
-        target = np.full(n, -1, np.int64)  # move index of each vertex's current proposal
+        around = self.corners()
+        target = np.full(n, -1, np.int32)  # move index of each vertex's current proposal
         target[seg_v] = best
-        seg_of_v = np.full(n, -1, np.int64)
+        prio = np.full(n, np.inf)  # its cost
+        prio[seg_v] = own
+        seg_of_v = np.full(n, -1, np.int32)
         seg_of_v[seg_v] = np.arange(S)
         live = target >= 0
+        big = np.iinfo(np.int32).max
+        rank = np.full(n, big, np.int32)  # per selection, over the live proposals (reset after use)
+        mu = np.full(n, big, np.int32)  # lowest rank of the live proposals into each vertex
+        wait_v = np.full(n, np.inf, np.float32)  # cost class of the waiting proposal of each vertex
+        wait_u = np.full(n, np.inf, np.float32)  # lowest cost class of the waiting proposals into each vertex
+        ring_v = np.zeros(n, bool)  # closed one-rings of the v of the collapses made this round
+        ring_vu = np.zeros(n, bool)  # ... and of their u
 
-        def ring_min(x, at):  # min of x over the closed one-ring of each vertex in ``at`` (all have neighbours)
+        def ring(at):  # the one-rings of the vertices ``at`` (all have neighbours): neighbours, segment starts
             lo, hi = start[at], start[at + 1]
-            m = np.minimum.reduceat(x[dst[concat_ranges(lo, hi)]], np.cumsum(hi - lo) - (hi - lo))
-            return np.minimum(m, x[at])
+            return at, dst[concat_ranges(lo, hi)], np.cumsum(hi - lo) - (hi - lo)
 
-        made_v, made_u = [], []
-        for _ in range(SELECTIONS):
-            lv = np.flatnonzero(live)
-            if not len(lv):
-                break
+        def ring_min(x, r):  # min of x over each closed one-ring of ``ring``
+            return np.minimum(np.minimum.reduceat(x[r[1]], r[2]), x[r[0]])
+
+        def mark(mask, at):
+            mask[at] = True
+            mask[dst[concat_ranges(start[at], start[at + 1])]] = True
+
+        made_v, made_u, made_c = [], [], []
+        waiting = False
+        lv = np.flatnonzero(live)
+        while len(lv):
             lu = dst[moves[target[lv]]]
-            r = np.full(n, big, np.int32)
-            r[lv] = rank[lv]
-            mu = np.full(n, big, np.int32)
-            np.minimum.at(mu, lu, rank[lv])
-            rv = rank[lv]
-            pick = (ring_min(r, lv) == rv) & (ring_min(r, lu) == rv) & (ring_min(mu, lv) == rv)
+            cl = cost_class(prio[lv])
+            rv = np.empty(len(lv), np.int32)
+            rv[np.argsort(rank_key(cl, self.tie[lv]), kind="stable")] = np.arange(len(lv), dtype=np.int32)
+            rank[lv] = rv
+            np.minimum.at(mu, lu, rv)
+            rlv, rlu = ring(lv), ring(lu)
+            pick = (ring_min(rank, rlv) == rv) & (ring_min(rank, rlu) == rv) & (ring_min(mu, rlv) == rv)
+            rank[lv] = big
+            mu[lu] = big
+            # a proposal conflicting with a waiting one of a cheaper class waits too (the sequential order)
+            held = np.zeros(len(lv), bool)
+            if waiting:
+                wait = np.minimum(np.minimum(ring_min(wait_v, rlv), ring_min(wait_v, rlu)), ring_min(wait_u, rlv))
+                held = wait < cl
+                pick &= ~held
+            del rlv, rlu
             sel, su = lv[pick], lu[pick]
-            mv = moves[target[sel]]
-            ok = self.legal(sel.astype(np.int32), su.astype(np.int32), mv, dst, count, start, keys)
+            ok = self.legal(sel.astype(np.int32), su.astype(np.int32), moves[target[sel]], dst, count, start, keys,
+                            around)
             v_ok, u_ok = sel[ok], su[ok]
             made_v.append(v_ok)
             made_u.append(u_ok)
-            # block every proposal that conflicts with a made collapse
-            ring_v = np.zeros(n, bool)
-            ring_v[v_ok] = True
-            ring_v[dst[concat_ranges(start[v_ok], start[v_ok + 1])]] = True
-            ring_vu = ring_v.copy()
-            ring_vu[u_ok] = True
-            ring_vu[dst[concat_ranges(start[u_ok], start[u_ok + 1])]] = True
-            live[lv] &= ~ring_vu[lv] & ~ring_v[lu]
-            # failed proposals: the next-cheapest move, up to TRIES per round
+            made_c.append(prio[v_ok])
+            live[v_ok] = False
+            mark(ring_v, v_ok)
+            mark(ring_vu, v_ok)
+            mark(ring_vu, u_ok)
             bad = sel[~ok]
-            sb = seg_of_v[bad]
             cost[target[bad]] = np.inf
-            tries[sb] += 1
-            retry = tries[sb] < TRIES
-            nb, _ = self.cheapest(cost, seg_start, sb[retry])
-            target[bad] = -1
-            target[bad[retry]] = nb
+            target[bad], prio[bad] = self.next_legal(bad, cost, seg_start, seg_of_v, moves, src, dst, count, start,
+                                                     keys, around)
             live[bad] = target[bad] >= 0
+            # every live proposal conflicting with a collapse made this round leaves it (H-R), at its current
+            # target; it waits for the next round with the held ones, holding back costlier conflicting proposals
+            keep = live[lv]
+            lv, held = lv[keep], held[keep]
+            lu = dst[moves[target[lv]]]
+            stop = held | ring_vu[lv] | ring_v[lu]
+            wv, wu = lv[stop], lu[stop]
+            wait_v[wv] = cost_class(prio[wv])
+            np.minimum.at(wait_u, wu, wait_v[wv])
+            live[wv] = False
+            waiting = waiting or len(wv) > 0
+            lv = lv[~stop]
         v_all = np.concatenate(made_v)
         u_all = np.concatenate(made_u)
-        o = np.argsort(rank[v_all], kind="stable")
+        o = np.lexsort((self.tie[v_all], np.concatenate(made_c)))
         return v_all[o].astype(np.int32), u_all[o].astype(np.int32)
 
     # -----------------------------------------------------------------------------------------------------------
