@@ -10,7 +10,8 @@ of ``Runtime.update()`` (cut + triangulation + relighting, after the first frame
 drawn by ``lodprt.render.Renderer`` against the full-mesh frame of the same camera and lights
 (``lodprt.display.compare.error_against_full``: PSNR clipped at white, relative RMSE). Baseline in the same run: the full mesh
 relit along the same orbit (LOD off). Writes ``benchmarks/results/view_cut.json`` and ``view_cut.png`` (error
-against time, one panel per scene).
+against time, one panel per scene). Also, per scene, both criteria at their defaults from two fixed views with the
+cut converged (``static_views``: triangles against the full mesh and PSNR).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from common import MODELS, environment, parser, plot_path, table, write
 
-SWEEPS = {"screen": (0.05, 0.1, 0.2, 0.4, 0.8), "thesis": (0.1, 0.2, 0.25, 0.315, 0.4)}
+SWEEPS = {"screen": (0.2, 0.35, 0.5, 0.7, 1.0, 1.4), "thesis": (0.1, 0.2, 0.25, 0.315, 0.4)}
 MODELS_USED = ("stanford-bunny", "spot", "fandisk")
 
 
@@ -64,6 +65,38 @@ def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
     return out
 
 
+def static_views(store, name: str, renderer, device: str) -> list[dict]:
+    """Both criteria at their defaults, cut converged, light on the middle sample, 400 x 300, from the default eye
+    of ``lodprt compare`` (``default_eye``: a three-quarter view from the front and above) and from a closer front
+    view of the object: triangles against the full mesh and PSNR (the issue's "done when" check)."""
+    from lodprt.display.compare import frame_error
+    from lodprt.runtime.camera import Camera, default_eye, object_bounds, scene_centre
+    from lodprt.runtime.frames import full_frame
+    from lodprt.runtime.session import Runtime
+
+    b = object_bounds(store)
+    c, size = 0.5 * (b[0] + b[1]), float(np.linalg.norm(b[1] - b[0]))
+    views = {"default eye": Camera(eye=default_eye(store), target=scene_centre(store), width=400, height=300),
+             "front": Camera(eye=tuple(c + size * np.array([0.25, 0.55, 1.1])), target=tuple(c), width=400,
+                             height=300)}
+    light = store.light_positions[store.num_samples // 2][None]
+    out = []
+    for criterion in ("screen", "thesis"):
+        rt = Runtime(store, criterion=criterion, device=device)
+        rt.set_lights(light)
+        for view, cam in views.items():
+            rt.set_camera(cam)
+            lod = rt.update(max_passes=10_000)
+            full = full_frame(store, cam, lights=light)
+            numbers = frame_error(renderer, lod, full, rt.white)[0]
+            out.append({"scene": name, "view": view, "criterion": f"{criterion} {rt.error_bound:g}",
+                        "triangles": len(lod.triangles), "full": len(full.triangles),
+                        "fewer": len(full.triangles) / max(len(lod.triangles), 1), "psnr_db": numbers["psnr_db"]})
+            print(f"  {view}, {criterion} default: {out[-1]['triangles']:,} / {out[-1]['full']:,} triangles, "
+                  f"{out[-1]['psnr_db']:.1f} dB", flush=True)
+    return out
+
+
 def main():
     p = parser(__doc__.splitlines()[0])
     p.add_argument("--floor", type=int, default=None, help="floor resolution (default 200; quick 60)")
@@ -79,13 +112,14 @@ def main():
     frames = args.frames or (16 if args.quick else 96)
     names = MODELS_USED[:1] if args.quick else MODELS_USED
     sweeps = {k: v[1:4:2] for k, v in SWEEPS.items()} if args.quick else SWEEPS
-    rows = []
+    rows, static = [], []
     with tempfile.TemporaryDirectory(prefix="lodprt-view-cut-") as tmp, Renderer() as renderer:
         for name in names:
             t = time.perf_counter()
             store = open_store(bake_scene(name, floor, Path(tmp), device))
             print(f"{name} + {floor} floor: {store.num_vertices:,} vertices, {len(store.faces):,} triangles "
                   f"(baked in {time.perf_counter() - t:.0f} s)", flush=True)
+            static += static_views(store, name, renderer, device)
             full = run_orbit(store, Runtime(store, lod=False, device=device), frames, frames, None)
             rows.append({"scene": name, "criterion": "full mesh", "error_bound": float("nan"), **full,
                          "median_psnr_db": float("inf"), "speedup": 1.0})
@@ -102,9 +136,14 @@ def main():
                        ("median_triangles", "triangles", ",.0f"), ("median_ms", "median ms", ".1f"),
                        ("p95_ms", "p95 ms", ".1f"), ("speedup", "vs full", ".2f"),
                        ("median_psnr_db", "PSNR dB", ".1f"), ("min_psnr_db", "worst dB", ".1f")]))
+    print()
+    print(table(static, [("scene", "scene", "s"), ("view", "view", "s"), ("criterion", "criterion (default)", "s"),
+                         ("triangles", "triangles", ",.0f"), ("full", "full", ",.0f"), ("fewer", "x fewer", ".1f"),
+                         ("psnr_db", "PSNR dB", ".1f")]))
     name = "view_cut" + ("-quick" if args.quick else "")
     print("wrote", write(name, {"benchmark": "view_cut", "quick": args.quick, "environment": environment(device),
-                                "floor": floor, "frames": frames, "rows": rows}, args.json))
+                                "floor": floor, "frames": frames, "rows": rows, "static_views": static},
+                                args.json))
     plot(rows, names, name)
 
 

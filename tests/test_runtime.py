@@ -9,7 +9,7 @@ from lodprt.model import sh
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import active_ancestors, dependency_violations
 from lodprt.runtime.camera import Camera, clip_planes, view_projection
-from lodprt.runtime.session import Runtime
+from lodprt.runtime.session import HYSTERESIS, Runtime
 from lodprt.store.bake_store import open_store
 
 
@@ -184,10 +184,11 @@ def test_camera_looking_away_gives_the_coarsest_cut(store):
 
 def test_incremental_reaches_a_converged_cut(store):
     """Reaching a view incrementally from another view gives a converged cut for it: legal, no active node over the
-    bound, every collapse the bound allows blocked by a finer neighbour (the El-Sana & Varshney rule); and it is
-    the cut converged from the base up to such blocks (under 1% of the nodes differ). Cuts are fixed points of the
-    rules, not unique: two collapses blocking each other may stay split on one path and never be split on
-    another."""
+    bound, every collapse the bound allows (error at most bound / HYSTERESIS) blocked by a finer neighbour (the
+    El-Sana & Varshney rule); and it is the cut converged from the base up to such blocks and the hysteresis band
+    (under 5% of the nodes differ). Cuts are fixed points of the rules, not unique: a node with an error between
+    bound / HYSTERESIS and the bound stays as it was, and two collapses blocking each other may stay split on one
+    path and never be split on another."""
     lights = [store.light_positions[4] + np.array([0.01, 0.0, -0.02])]
     inc = Runtime(store, error_bound=0.1)
     converge(inc, orbit_camera(inc, 2.0), lights)
@@ -201,11 +202,12 @@ def test_incremental_reaches_a_converged_cut(store):
     par = np.unique(h.parent[act])
     cand = par[(par >= 0) & cut.active[h.children[np.maximum(par, 0), 0]] & cut.active[h.children[np.maximum(par, 0), 1]]]
     culled, err = inc.node_errors(cand)[:2]
-    assert all(len(cut.blockers_of_coarsen(int(k))) for k in cand[culled | (err <= inc.error_bound)])
+    loose = culled | (err * HYSTERESIS <= inc.error_bound)  # collapses the bound allows (with the hysteresis)
+    assert all(len(cut.blockers_of_coarsen(int(k))) for k in cand[loose])
     fresh = Runtime(store, error_bound=0.1)
     converge(fresh, orbit_camera(fresh, 0.5), lights)
     differ = np.count_nonzero(inc.cut.active != fresh.cut.active)
-    assert differ <= 0.01 * len(act), (differ, len(act))
+    assert differ <= 0.05 * len(act), (differ, len(act))
 
 
 def test_culling_is_conservative(store):

@@ -20,7 +20,8 @@ log = logging.getLogger(__name__)
 class Frame:
     """What one ``Runtime.update()`` produces for the display (all arrays are fresh copies).
 
-    vertex_ids (A,) int32 original vertex of each active node (store vertex order);
+    vertex_ids (A,) int32 original vertex of each active node some face uses (store vertex order; vertices no face
+    uses are never drawn and not relit);
     positions (A, 3) float32 and normals (A, 3) float32 of those vertices;
     triangles (M, 3) int32 indices into ``positions`` (the view cut's mesh, degenerate faces dropped);
     coefficients (A, 3, ncoef) float32 SH coefficients over the view direction of the outgoing radiance, RGB,

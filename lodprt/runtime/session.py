@@ -1,7 +1,7 @@
 """The ``Runtime`` (SPEC 5; thesis 3.4, T-12..T-15; seed 003 section 5; S-1, S-2 beyond the thesis): relight a
 baked scene with moving point lights and move a view-dependent cut of the vertex hierarchy every frame.
 
-    rt = lodprt.Runtime(lodprt.open_store("bunny.zarr"))          # criterion "screen", bound 0.2 of white
+    rt = lodprt.Runtime(lodprt.open_store("bunny.zarr"))          # criterion "screen", bound 0.8 of white
     rt.set_lights([(0.1, 0.28, 0.0)], colors=[(1.0, 0.9, 0.8)])
     rt.set_camera((0, 0.3, 0.6), (0, 0.1, 0), fov=40, width=800, height=600)
     frame = rt.update()          # Frame: positions, triangles, coefficients, radiance, stats
@@ -45,19 +45,22 @@ NEAR = 2.0
 #: LIGHT_JUMP of their sum, counts as a jump
 JUMP = 0.1
 LIGHT_JUMP = 0.4
+#: a node is collapsed only when its error is at most bound / HYSTERESIS (and split above the bound): a node near
+#: the bound does not flip every frame as the camera moves, which would cost collapses, splits and retriangulation
+HYSTERESIS = 1.25
 #: a failed collapse of a node with more original edges under it than this backs off for a few frames
 BACKOFF_EDGES = 20_000
 #: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
 CRITERIA = ("screen", "thesis")
 #: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
-DEFAULT_ERROR_BOUND = {"screen": 0.7, "thesis": 0.25}
+DEFAULT_ERROR_BOUND = {"screen": 0.8, "thesis": 0.25}
 #: "screen": the geometric error on screen, pixels, that weighs as much as the default bound (the exchange rate
-#: between pixels of displacement and units of white: 1 px = 0.2 of white at the default)
+#: between pixels of displacement and units of white: 1 px = the default bound)
 PIXEL_TOLERANCE = 1.0
 #: "screen": the share of the screen a node may cover at the bound's per-pixel error; a larger node's shading term
 #: grows with sqrt(area / (AREA_SHARE W H)), so its squared error summed over its pixels stays under
-#: bound^2 AREA_SHARE W H (S-1): its share of the frame's mean squared error does not depend on the resolution
-AREA_SHARE = 1.0 / 8192
+#: bound^2 AREA_SHARE W H (S-1): it adds at most bound^2 AREA_SHARE to the frame's mean squared error
+AREA_SHARE = 1.0 / 32768
 
 
 class NodeErrors(typing.NamedTuple):
@@ -78,9 +81,10 @@ class Runtime:
     """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
 
     criterion: "screen" (default; S-1: the shading a coarse node could get wrong (S-2), weighted by the pixels it
-    covers, and its geometric error in pixels at ``pixel_tolerance`` per default bound, each against the bound) or
-    "thesis" (T-14: ``alpha e_geo + (1 - alpha) e_lumi``); error_bound: refine above, coarsen at or below (None:
-    the criterion's default, DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs
+    covers (above AREA_SHARE of the screen by the square root of its area), and its geometric error in pixels at
+    ``pixel_tolerance`` per default bound, each against the bound) or "thesis" (T-14: ``alpha e_geo + (1 - alpha)
+    e_lumi``); error_bound: refine above, coarsen at or below bound / HYSTERESIS (None: the criterion's default,
+    DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs
     e_geo against e_lumi (T-14 only);
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
@@ -115,6 +119,8 @@ class Runtime:
         self.positions = np.asarray(store.positions, np.float64)
         self.normals = np.asarray(store.normals, np.float64)
         self._pos32, self._nrm32 = self.positions.astype(np.float32), self.normals.astype(np.float32)  # frames
+        self._drawn = np.zeros(len(self.positions), bool)  # the vertices some face uses
+        self._drawn[self.faces.ravel()] = True
         self.bounds = np.array([self.positions.min(0), self.positions.max(0)]) if len(self.positions) else np.zeros((2, 3))
         self.set_error_bound(error_bound, alpha)
         if triangle_budget is not None and int(triangle_budget) < 1:
@@ -126,7 +132,6 @@ class Runtime:
         self.lod = bool(lod)
         self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
                                         weighting=weighting, outside=outside)
-        V = h.num_vertices
         self.order = store.sh_order
         # T-15 per sample when the lights first use it (SPEC 5), float32 slots, vertex-major (V, slots, C, ncoef)
         self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress)
@@ -418,7 +423,7 @@ class Runtime:
         culled, err = self._culled[nodes], self._err[nodes]
         k = len(rc)
         want_refine = ~culled[:k] & (err[:k] > self.error_bound)
-        want_coarsen = culled[k:] | (err[k:] <= self.error_bound)
+        want_coarsen = culled[k:] | (err[k:] * HYSTERESIS <= self.error_bound)
         refined = coarsened = touched = 0
         # a collapse found blocked waits until the finer neighbour found blocking it is gone (one per node);
         # collapses, then forced splits, are made in turn by the sequential kernels (Cut.coarsen_list /
@@ -471,10 +476,12 @@ class Runtime:
         self._dirty = False
         t1 = time.perf_counter()
         h = self.h
-        vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
+        nodes = self.cut.nodes
+        vid = np.sort(h.vertex[nodes]).astype(np.int32)  # ascending: gathers walk memory forward
+        vid = vid[self._drawn[vid]]  # a vertex no face uses is never drawn: not relit
         lut = np.full(h.num_vertices, -1, np.int32)
         lut[vid] = np.arange(len(vid), dtype=np.int32)
-        tri = lut[self._tri.faces(self.cut.anc)]
+        tri = np.take(lut, self._tri.faces(self.cut.anc))
         t2 = time.perf_counter()
         coef, rad = self._relight(vid)
         t3 = time.perf_counter()
@@ -487,7 +494,7 @@ class Runtime:
                 self._dirty = True
         stats = {
             "triangles": int(len(tri)),
-            "active_nodes": int(len(vid)),
+            "active_nodes": int(len(nodes)),
             "vertices": int(len(vid)),
             "nodes_touched": int(touched),
             "refined": int(refined),
@@ -501,8 +508,8 @@ class Runtime:
             "ms_relight": 1e3 * (t3 - t2),
             "ms_total": 1e3 * (t3 - t0),
         }
-        return Frame(vertex_ids=vid, positions=self._pos32[vid],
-                     normals=self._nrm32[vid], triangles=tri.astype(np.int32),
+        return Frame(vertex_ids=vid, positions=np.take(self._pos32, vid, axis=0),
+                     normals=np.take(self._nrm32, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats)
 

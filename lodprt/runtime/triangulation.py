@@ -49,7 +49,7 @@ class IncrementalTriangulation:
                                                        *self._in, a, *self._state], device=self.device)
         n = int(count.numpy()[0])
         if self.device == "cpu":  # the state is host memory: a numpy gather
-            return fmap.numpy()[live.numpy()[:n]]
+            return np.take(fmap.numpy(), live.numpy()[:n], axis=0)  # np.take: faster than fancy indexing
         out = wp.empty((n, 3), dtype=wp.int32, device=self.device)
         if n:  # gathered where the state lives: only the cut's faces come back from the device
             wp.launch(kv.gather_live, dim=n, inputs=[live, fmap], outputs=[out], device=self.device)
