@@ -10,7 +10,8 @@ names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
    sampled region, 800 x 600 screen, two view cuts: the thesis criterion (T-14, error bound 0.25, alpha 0.6) and
    the default "screen" criterion at its default bound. Per frame: ``Runtime.update()`` split into cut update,
    triangulation and relighting (ms), and triangles. Baseline in the same run: the same paths with LOD off (the
-   full mesh relit every frame by the same kernel).
+   full mesh relit every frame by the same kernel). The three are stepped in lockstep, frame by frame, so that
+   the machine's slow spells fall on all of them (``run_paths``).
 2. Error-bound sweep of the thesis criterion, 0.2, 0.25, 0.315, 0.4 at alpha 0.6, over the orbit (120 frames; quick: 40): median
    triangles beside the thesis' figures 21-24, median frame time (``stats["ms_total"]`` of ``Runtime.update()``,
    as in 1.: the rendering below is not timed), and the error of the frame against the full-resolution frame:
@@ -42,16 +43,20 @@ def build_store(quick: bool, folder: Path, device: str) -> Path:
     return path
 
 
-def run_path(rt, path: str, frames: int) -> list[dict]:
-    """Per-frame stats of ``rt`` along a camera path (the first frame, which converges from the base, kept apart)."""
+def run_paths(rts: dict, path: str, frames: int) -> dict:
+    """Per-frame stats of each Runtime of ``rts`` (name -> Runtime) along one camera path, stepped in lockstep: at
+    every frame each Runtime updates for the same camera and lights in turn, so that a slow spell of the machine
+    falls on all of them alike and the ratios compare like with like (the first frame, which converges from the
+    base, is kept apart by ``summary``)."""
     from lodprt.runtime.camera import camera_path
 
-    out = []
-    for cam, lights in camera_path(rt, path, frames):
-        rt.set_camera(cam)
-        rt.set_lights(lights)
-        s = rt.update().stats
-        out.append({k: s[k] for k in KEYS})
+    out = {name: [] for name in rts}
+    for cam, lights in camera_path(next(iter(rts.values())), path, frames):
+        for name, rt in rts.items():
+            rt.set_camera(cam)
+            rt.set_lights(lights)
+            s = rt.update().stats
+            out[name].append({k: s[k] for k in KEYS})
     return out
 
 
@@ -133,8 +138,7 @@ def main():
         full = Runtime(store, lod=False, device=device)
         paths = {}
         for kind in ("orbit", "dolly"):
-            paths[kind] = {"lod": run_path(lod, kind, frames), "screen": run_path(screen, kind, frames),
-                           "full": run_path(full, kind, frames)}
+            paths[kind] = run_paths({"lod": lod, "screen": screen, "full": full}, kind, frames)
             lod.set_lod(True)  # the dolly starts again from the base mesh, like a fresh view
             screen.set_lod(True)
             s, c, b = (summary(paths[kind][m]) for m in ("lod", "screen", "full"))

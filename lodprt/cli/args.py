@@ -91,7 +91,8 @@ def add_view_cut(p: argparse.ArgumentParser) -> None:
                    help="view-cut criterion: 'screen' bounds the error on screen (luminance in units of white, "
                         "geometry in pixels; default), 'thesis' is T-14's blend alpha e_geo + (1 - alpha) e_lumi")
     p.add_argument("--error-bound", type=float, default=None, metavar="E",
-                   help="view cut error bound (default 0.2 of white for 'screen', 0.25 for 'thesis')")
+                   help="view cut error bound (default 0.8 of white for 'screen': each coarse node adds at most "
+                        "E^2 / 32768 to the frame's mean squared error; 0.25 for 'thesis')")
     p.add_argument("--alpha", type=float, default=0.6, metavar="A",
                    help="'thesis' only: weight of the geometric error against the luminance error (default 0.6)")
 
