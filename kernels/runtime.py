@@ -112,6 +112,7 @@ def view_errors(
     criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
     exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known
     bound: float,  # In: the error bound (the decision's threshold)
+    hysteresis: float,  # In: >= 1; a candidate is collapsed only at or below bound / hysteresis
     geo_rate: float,  # In: S-1 units of white per pixel of geometric error
     area_ref: float,  # In: S-1 pixels a node may cover before its shading term grows with sqrt(area / area_ref)
     alpha: float,  # In: weight of e_geo (T-14)
@@ -180,8 +181,9 @@ def view_errors(
     footprint[k] = fp
     e_lumi[k] = -1.0  # -1: not computed (the decision did not need it; exact = 1 computes every term)
     e_detail[k] = -1.0
-    if criterion == 0 and exact == 0 and (geo_term > bound or cover <= bound):
-        err[k] = wp.max(geo_term, cover)  # decided without the luminance: refine on geometry, or <= the bound
+    if criterion == 0 and exact == 0 and (geo_term > bound or cover * hysteresis <= bound):
+        # decided without the luminance: refine on geometry, or at most bound / hysteresis (either decision)
+        err[k] = wp.max(geo_term, cover)
         if geo_term <= bound:
             err[k] = wp.min(err[k], bound)
         return

@@ -373,7 +373,8 @@ class Runtime:
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
                 *bounds, CRITERIA.index(self.criterion), int(bool(exact)),
-                float(self.error_bound), self.geo_rate(), self.area_ref(), self.alpha, wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
+                float(self.error_bound), float(HYSTERESIS), self.geo_rate(), self.area_ref(), self.alpha,
+                wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
         culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
         return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))

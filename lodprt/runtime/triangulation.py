@@ -1,8 +1,8 @@
 """The cut's mesh, kept up to date incrementally (T-3.2; ``lodprt.kernels.view_cut.retriangulate``): each frame
 only the original faces around vertices whose active ancestor changed are mapped again, and the non-degenerate
 faces are kept as a dense list, so a frame's triangulation costs what changed (and one numpy comparison per
-vertex to find it) instead of a pass over every original face. ``lodprt.model.hierarchy.triangulate`` is the reference (the same
-faces, in another order)."""
+vertex to find it) instead of a pass over every original face. ``lodprt.model.hierarchy.triangulate`` is the
+reference (the same faces, in another order)."""
 
 from __future__ import annotations
 
