@@ -247,6 +247,17 @@ def map_faces(h: Hierarchy, faces: np.ndarray, anc: np.ndarray) -> tuple[np.ndar
     return f, (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
 
 
+def vertex_corners(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The face corners around each of ``n`` vertices, as CSR: start (n + 1,) int64 and flat corner indices
+    (3F,) int32 into ``faces.ravel()`` (face ``c // 3``, corner ``c % 3``), grouped by vertex, ascending within
+    each vertex."""
+    flat = np.asarray(faces).ravel()
+    at = np.argsort(flat, kind="stable").astype(np.int32)
+    start = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(flat, minlength=n), out=start[1:])
+    return start, at
+
+
 def concat_ranges(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The indices ``lo[0]..hi[0]-1, lo[1]..hi[1]-1, ...`` concatenated (int64), vectorised."""
     n = np.asarray(hi, np.int64) - np.asarray(lo, np.int64)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.model.hierarchy import concat_ranges
+from lodprt.model.hierarchy import concat_ranges, vertex_corners
 
 #: a moved face must keep its normal within this cosine of its old one (0 = 90 degrees)
 FOLD_COS = 0.0
@@ -191,18 +191,9 @@ class CollapseRounds:
         return best, m
 
     # -----------------------------------------------------------------------------------------------------------
-    def corners(self):
-        """The face corners around each vertex: CSR start (n + 1,) int64 and flat corner indices (3M,) int32
-        (``faces.ravel()`` positions: face ``c // 3``, corner ``c % 3``), grouped by vertex."""
-        flat = self.faces.ravel()
-        at = np.argsort(flat).astype(np.int32)
-        fstart = np.zeros(self.n + 1, np.int64)
-        np.cumsum(np.bincount(flat, minlength=self.n), out=fstart[1:])
-        return fstart, at
-
     def legal(self, v, u, e, dst, count, start, keys, around):
         """(K,) bool: which collapses ``v -> u`` (local ids; ``e`` their edge indices; ``around`` the face
-        corners of ``corners()``) are legal on the current mesh (docs/HIERARCHY.md): link condition, the
+        corners of ``hierarchy.vertex_corners``) are legal on the current mesh (docs/HIERARCHY.md): link condition, the
         survivor's valence, no fold-over (thesis figure 6), no sliver. The boundary and component rules hold
         already for every proposal. A vertex may appear in several rows (one per move checked)."""
         n = self.n
@@ -277,7 +268,7 @@ class CollapseRounds:
         if not S:
             return np.zeros(0, np.int32), np.zeros(0, np.int32)
         best, own = self.cheapest(cost, seg_start, np.arange(S))
-        around = self.corners()
+        around = vertex_corners(self.faces, self.n)
         target = np.full(n, -1, np.int32)  # move index of each vertex's current proposal
         target[seg_v] = best
         prio = np.full(n, np.inf)  # its cost

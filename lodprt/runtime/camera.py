@@ -78,8 +78,7 @@ def object_bounds(store) -> np.ndarray:
     pos = np.asarray(store.positions)
     oid = np.asarray(store.read("scene/object_id"))
     names = list(store.root["scene"].attrs.get("object_names", []))
-    used = np.zeros(len(pos), bool)
-    used[np.asarray(store.faces).ravel()] = True
+    used = store.referenced
     keep = used.copy()
     if "floor" in names:
         keep &= oid != names.index("floor")

@@ -119,8 +119,6 @@ class Runtime:
         self.positions = np.asarray(store.positions, np.float64)
         self.normals = np.asarray(store.normals, np.float64)
         self._pos32, self._nrm32 = self.positions.astype(np.float32), self.normals.astype(np.float32)  # frames
-        self._drawn = np.zeros(len(self.positions), bool)  # the vertices some face uses
-        self._drawn[self.faces.ravel()] = True
         self.bounds = np.array([self.positions.min(0), self.positions.max(0)]) if len(self.positions) else np.zeros((2, 3))
         self.set_error_bound(error_bound, alpha)
         if triangle_budget is not None and int(triangle_budget) < 1:
@@ -479,7 +477,7 @@ class Runtime:
         h = self.h
         nodes = self.cut.nodes
         vid = np.sort(h.vertex[nodes]).astype(np.int32)  # ascending: gathers walk memory forward
-        vid = vid[self._drawn[vid]]  # a vertex no face uses is never drawn: not relit
+        vid = vid[self.store.referenced[vid]]  # a vertex no face uses is never drawn: not relit
         lut = np.full(h.num_vertices, -1, np.int32)
         lut[vid] = np.arange(len(vid), dtype=np.int32)
         tri = np.take(lut, self._tri.faces(self.cut.anc))

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from lodprt.devices import warp
-from lodprt.model.hierarchy import Hierarchy
+from lodprt.model.hierarchy import Hierarchy, vertex_corners
 
 
 class IncrementalTriangulation:
@@ -23,11 +23,9 @@ class IncrementalTriangulation:
         self.device = device
         faces = np.ascontiguousarray(faces, np.int32).reshape(-1, 3)
         V, F = h.num_vertices, len(faces)
-        fv = faces.ravel()
-        order = np.argsort(fv, kind="stable")  # faces around each original vertex (CSR)
-        ptr = np.searchsorted(fv[order], np.arange(V + 1)).astype(np.int32)
+        ptr, corner = vertex_corners(faces, V)  # faces around each original vertex (CSR)
         i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device)  # noqa: E731
-        self._in = [i32(ptr), i32(order // 3), wp.array(faces, dtype=wp.int32, ndim=2, device=device),
+        self._in = [i32(ptr), i32(corner // 3), wp.array(faces, dtype=wp.int32, ndim=2, device=device),
                     i32(h.vertex)]
         self._seen = np.full(V, -1, np.int32)  # anc at the last call (-1: never)
         self._state = [wp.zeros((F, 3), dtype=wp.int32, device=device),

@@ -85,6 +85,15 @@ class Store:
         return int(self.root["scene/positions"].shape[0])
 
     @property
+    def referenced(self) -> np.ndarray:
+        """(V,) bool: the vertices some face uses (made once per Store; the others are never drawn)."""
+        if "referenced" not in self._cache:
+            referenced = np.zeros(self.num_vertices, bool)
+            referenced[self.faces.ravel()] = True
+            self._cache["referenced"] = referenced
+        return self._cache["referenced"]
+
+    @property
     def sh_order(self) -> int:
         return int(self.attrs["sh_order"])
 
@@ -163,12 +172,9 @@ class Store:
         """(V, C, ncoef) float64 coefficients of ``sample`` completed afresh (T-15), not cached: ``coefficients``
         caches them."""
         ids, coeffs = self.sample(sample)
-        faces = self.faces
-        referenced = np.zeros(self.num_vertices, bool)
-        referenced[faces.ravel()] = True
         kept = np.zeros(self.num_vertices, bool)
         kept[ids] = True
-        if (referenced & ~kept).any():
+        if (self.referenced & ~kept).any():
             cut = self.cut_arrays(sample)
             out = self.completion_plan().complete(ids, coeffs.astype(np.float64), self.num_vertices, **cut)
         else:
@@ -190,15 +196,13 @@ class Store:
 
         kd, ks, n = self.read("materials/kd"), self.read("materials/ks"), self.read("materials/shininess")
         a = dict(self.root["lights"].attrs)
-        referenced = np.zeros(self.num_vertices, bool)
-        referenced[self.faces.ravel()] = True
         return Scene(
             positions=self.positions.astype(np.float64),
             faces=self.faces,
             normals=self.normals.astype(np.float64),
             material_id=self.read("scene/material_id"),
             object_id=self.read("scene/object_id"),
-            referenced=referenced,
+            referenced=self.referenced.copy(),
             materials=[Material(tuple(float(x) for x in kd[m]), float(ks[m]), float(n[m])) for m in range(len(ks))],
             object_names=list(self.root["scene"].attrs.get("object_names", [])),
             lights=Lights(tuple(a["grid"]), tuple(a["box"]), tuple(a["intensity"]), a["falloff"], float(a["radius"])),
