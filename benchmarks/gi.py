@@ -13,7 +13,6 @@ radiance inside the direct shadows. Writes benchmarks/results/gi[-quick].json, .
 
 from __future__ import annotations
 
-import math
 import shutil
 import sys
 import tempfile
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from common import MODELS, environment, parser, plot_path, table, write
+from mitsuba_ref import mitsuba_image, psnr, require_mitsuba
 
 KD = 0.8
 #: the light of the Mitsuba comparison and the camera (scene units of the bunny, about 0.15 across)
@@ -97,46 +97,6 @@ def sweep(scene, tree, args, tmp: Path) -> list[dict]:
 # -- Mitsuba 3 --------------------------------------------------------------------------------------------------
 
 
-def require_mitsuba():
-    try:
-        import mitsuba as mi
-    except ImportError:
-        sys.exit("benchmarks/gi.py --mitsuba needs Mitsuba 3: pip install 'lodprt[reference]' (or pip install "
-                 "'mitsuba>=3.5'); the variant scalar_rgb runs on the CPU")
-    mi.set_variant("scalar_rgb")
-    return mi
-
-
-def mitsuba_image(scene, light, intensity, bounces: int, size, spp: int, tmp: Path) -> np.ndarray:
-    """Linear RGB (H, W, 3) of ``scene`` by Mitsuba's path tracer: Lambert kd, a point light of intensity pi I
-    (lodprt's ``kd I cos / d^2`` is ``(kd / pi) (pi I) cos / d^2``), max_depth = bounces + 2, the same camera."""
-    mi = require_mitsuba()
-    import trimesh
-
-    shapes = {}
-    for k, name in enumerate(scene.object_names):
-        sel = scene.object_id == k
-        remap = np.cumsum(sel) - 1
-        faces = scene.faces[sel[scene.faces[:, 0]]]
-        mesh = trimesh.Trimesh(scene.positions[sel], remap[faces], vertex_normals=scene.normals[sel], process=False)
-        ply = tmp / f"{name}.ply"
-        mesh.export(ply, vertex_normal=True)
-        kd = scene.materials[scene.material_id[np.flatnonzero(sel)[0]]].kd
-        shapes[name] = {"type": "ply", "filename": str(ply), "face_normals": False,
-                        "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(kd)}}}
-    w, h = size
-    sensor = {"type": "perspective", "fov": FOV, "fov_axis": "y", "near_clip": 1e-3, "far_clip": 100.0,
-              "to_world": mi.ScalarTransform4f().look_at(origin=list(EYE), target=list(TARGET), up=[0, 1, 0]),
-              "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-              "sampler": {"type": "independent", "sample_count": spp}}
-    desc = {"type": "scene", "integrator": {"type": "path", "max_depth": bounces + 2, "hide_emitters": True},
-            "sensor": sensor, "light": {"type": "point", "position": list(map(float, light)),
-                                        "intensity": {"type": "rgb", "value": [math.pi * c for c in intensity]}}}
-    desc.update(shapes)
-    img = mi.render(mi.load_dict(desc))
-    return np.asarray(img, np.float64)[:, :, :3]
-
-
 def lodprt_image(store_path: Path, size, supersample: int = 4) -> np.ndarray:
     """Linear RGB (H, W, 3) of sample 0 by lodprt's renderer, ``supersample``^2 pixels averaged per pixel (as the
     path tracer's box filter averages over the pixel)."""
@@ -151,14 +111,6 @@ def lodprt_image(store_path: Path, size, supersample: int = 4) -> np.ndarray:
     with Renderer() as r:
         img = r.image(full_frame(store, cam, sample=0), camera=cam, linear=True, light_markers=False).astype(np.float64)
     return img.reshape(h, supersample, w, supersample, 3).mean((1, 3))
-
-
-def psnr(a: np.ndarray, b: np.ndarray, white: float, mask=None) -> float:
-    """PSNR of display values clip(L / white, 0, 1); ``mask`` restricts it to some pixels."""
-    x, y = np.clip(a / white, 0, 1), np.clip(b / white, 0, 1)
-    if mask is not None:
-        x, y = x[mask], y[mask]
-    return float(10 * np.log10(1.0 / max(np.mean((x - y) ** 2), 1e-20)))
 
 
 def mitsuba_check(args, tmp: Path) -> dict:
@@ -184,10 +136,10 @@ def mitsuba_check(args, tmp: Path) -> dict:
         images[label] = lodprt_image(tmp / f"{label}.zarr", size)
         print(f"  lodprt {label}: bake {res.bake_seconds:.1f} s, rendered in {time.perf_counter() - t:.1f} s", flush=True)
     t = time.perf_counter()
-    ref = mitsuba_image(scene, MITSUBA_LIGHT, scene.lights.intensity, B, size, args.spp, tmp)
+    ref = mitsuba_image(scene, MITSUBA_LIGHT, scene.lights.intensity, B, size, args.spp, tmp, camera=(EYE, TARGET, FOV))
     out["mitsuba_s"] = time.perf_counter() - t
     # direct light from a point light is noise-free but for the pixel filter: few samples find the shadows
-    direct_ref = mitsuba_image(scene, MITSUBA_LIGHT, scene.lights.intensity, 0, size, 16, tmp)
+    direct_ref = mitsuba_image(scene, MITSUBA_LIGHT, scene.lights.intensity, 0, size, 16, tmp, camera=(EYE, TARGET, FOV))
     white = float(np.percentile(ref[ref.max(2) > 0], 99.5))
     fg = ref.max(2) > 0
     shadow = fg & (images["direct"].max(2) <= 0) & (direct_ref.max(2) <= 1e-3 * white)  # both say: direct shadow

@@ -23,6 +23,31 @@ def ray_origin(p: wp.vec3, n: wp.vec3, offset: float):
     return p + offset * n
 
 
+@wp.func
+def light_state(
+    mesh: wp.uint64,  # In: BVH of the whole scene
+    p: wp.vec3,  # In: vertex position
+    n: wp.vec3,  # In: unit vertex normal
+    light: wp.vec3,  # In: light position
+    offset: float,  # In: ray offset in scene units
+):
+    """SHADOWED, LIT or BACK_FACING of one vertex for one point light (one any-hit ray when it faces the light)."""
+    to_light = light - p
+    if wp.length(to_light) <= offset:
+        # the light sits on the vertex: nothing can lie between them
+        return int(LIT)
+    if wp.dot(n, to_light) <= 0.0:
+        return int(BACK_FACING)  # no ray: the surface itself hides the light
+    o = ray_origin(p, n, offset)
+    d = light - o
+    dist = wp.length(d)
+    if dist <= 2.0 * offset:
+        return int(LIT)
+    if wp.mesh_query_ray_anyhit(mesh, o, d / dist, dist - offset):
+        return int(SHADOWED)
+    return int(LIT)
+
+
 @wp.kernel
 def shadow_rays(
     mesh: wp.uint64,  # In: BVH of the whole scene
@@ -35,24 +60,4 @@ def shadow_rays(
 ):
     k = wp.tid()
     v = ids[k]
-    p = points[v]
-    n = normals[v]
-    to_light = light - p
-    if wp.length(to_light) <= offset:
-        # the light sits on the vertex: nothing can lie between them
-        visible[k] = wp.uint8(LIT)
-        return
-    if wp.dot(n, to_light) <= 0.0:
-        visible[k] = wp.uint8(BACK_FACING)  # no ray: the surface itself hides the light
-        return
-    o = ray_origin(p, n, offset)
-    d = light - o
-    dist = wp.length(d)
-    if dist <= 2.0 * offset:
-        visible[k] = wp.uint8(LIT)
-        return
-    hit = wp.mesh_query_ray_anyhit(mesh, o, d / dist, dist - offset)
-    if hit:
-        visible[k] = wp.uint8(SHADOWED)
-    else:
-        visible[k] = wp.uint8(LIT)
+    visible[k] = wp.uint8(light_state(mesh, points[v], normals[v], light, offset))

@@ -95,6 +95,19 @@ def add_view_cut(p: argparse.ArgumentParser) -> None:
                         "E^2 / 32768 to the frame's mean squared error; 0.25 for 'thesis')")
     p.add_argument("--alpha", type=float, default=0.6, metavar="A",
                    help="'thesis' only: weight of the geometric error against the luminance error (default 0.6)")
+    add_interpolation(p)
+
+
+def add_interpolation(p: argparse.ArgumentParser) -> None:
+    """``--interpolation``: how a light between samples is lit (docs/RUNTIME.md, "Lights anywhere")."""
+    from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION, INTERPOLATIONS
+
+    p.add_argument("--interpolation", choices=INTERPOLATIONS, default=DEFAULT_INTERPOLATION,
+                   help="a light between samples: 'direct' (default) evaluates its direct Phong light exactly, its "
+                        "shadows from the samples where they agree and a shadow ray where they disagree, plus the "
+                        "samples' interpolated residual (indirect light); 'direct-blend' blends the samples' "
+                        "visibility instead of casting rays; 'direct-rays' casts a ray for every vertex; 'thesis' "
+                        "blends the samples' radiance (T-12)")
 
 
 def add_light(p, *, required: bool = False, help: str = "a point light's position (repeat for several lights)") -> None:

@@ -125,7 +125,8 @@ def _view_setup(args, store):
 
 
 def _view_cut(args) -> dict:
-    return {"error_bound": args.error_bound, "alpha": args.alpha, "criterion": args.criterion}
+    return {"error_bound": args.error_bound, "alpha": args.alpha, "criterion": args.criterion,
+            "interpolation": args.interpolation}
 
 
 def _draw_options(args) -> dict:

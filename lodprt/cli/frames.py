@@ -8,7 +8,7 @@ import json
 from lodprt.cli import args as cli_args
 
 FRAME_KEYS = ("triangles", "active_nodes", "nodes_touched", "refined", "coarsened", "ms_cut", "ms_triangulate",
-              "ms_relight", "ms_total")
+              "ms_relight", "ms_total", "shadow_rays")
 
 
 def register(sub) -> None:
@@ -44,7 +44,8 @@ def cmd_frames(args) -> int:
     cli_args.at_least("--error-every", args.error_every, 0, " (0: no image error)")
     store = open_store(args.store)
     rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
-                  triangle_budget=args.triangle_budget, device=args.device, lod=not args.full)
+                  triangle_budget=args.triangle_budget, device=args.device, lod=not args.full,
+                  interpolation=args.interpolation)
     errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
     try:
@@ -102,7 +103,8 @@ def _frames_summary(args, rt, store, rows) -> dict:
     ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
     tris = np.array([r["triangles"] for r in rows])
     summary = {"frames": len(rows), "path": args.path, "lod": not args.full, "criterion": rt.criterion,
-               "error_bound": rt.error_bound, "alpha": args.alpha, "first_frame_ms": rows[0]["ms_total"],
+               "interpolation": rt.interpolation, "error_bound": rt.error_bound, "alpha": args.alpha,
+               "first_frame_ms": rows[0]["ms_total"],
                "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
                "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
                "device": rt.device}

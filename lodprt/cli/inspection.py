@@ -27,7 +27,8 @@ def _add_radiance(sub) -> None:
         help="radiance toward an eye for every vertex, from a light sample or arbitrary point lights",
         description="Reconstruct the radiance toward the eye of every scene vertex (store order) and save it as "
         "a (V, 3) float32 .npy (linear RGB): either of light sample K (--sample) or of point lights anywhere in "
-        "the sampled region (--light, repeatable; interpolated from the 8 nearest samples, T-12, and summed). "
+        "the sampled region (--light, repeatable; the light's direct term exactly plus the 8 nearest samples' "
+        "interpolated residual by default, or their radiance blended with --interpolation thesis, T-12; summed). "
         "Vertices the light cut did not keep are completed from their pre-collapse neighbours (T-15).",
     )
     cli_args.add_store(r)
@@ -37,6 +38,7 @@ def _add_radiance(sub) -> None:
     cli_args.add_colors(r)
     r.add_argument("--outside", choices=("clamp", "error"), default="clamp",
                    help="a light outside the sampled region: clamp it into the region with a warning (default) or refuse")
+    cli_args.add_interpolation(r)
     cli_args.add_eye(r)
     cli_args.add_output(r, "rad.npy", "output .npy")
     r.set_defaults(handler=cmd_radiance)
@@ -87,7 +89,8 @@ def cmd_radiance(args) -> int:
         cli_args.check_colors(args.color, args.light)
         from lodprt.runtime.frames import light_radiance
 
-        rad = light_radiance(store, args.light, args.eye, colors=args.color, outside=args.outside)
+        rad = light_radiance(store, args.light, args.eye, colors=args.color, outside=args.outside,
+                             interpolation=args.interpolation)
     np.save(out, rad)
     print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
     return 0

@@ -8,11 +8,12 @@ import numpy as np
 from lodprt.display.pictures import check_output
 from lodprt.display.render import Renderer
 from lodprt.runtime.frames import auto_white, full_frame
+from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.session import frame_source
 
 
 def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen",
+                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
                    overwrite: bool = False, scale: float | None = None, wireframe: bool = False,
                    per_vertex: bool = False, exposure: float = 0.0, white: float | None = None,
                    markers: bool = True) -> dict:
@@ -29,7 +30,8 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     import matplotlib.pyplot as plt
 
     out = check_output(out, (".png",), overwrite=overwrite)
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion)
+    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion,
+                          interpolation=interpolation)
     error_bound = getattr(source, "error_bound", error_bound)
     source.set_lights(lights, colors)
     source.set_camera(camera)

@@ -29,6 +29,7 @@ import numpy as np
 from lodprt.errors import LodprtError
 from lodprt.runtime.camera import Camera, default_eye, scene_centre
 from lodprt.runtime.frames import auto_white
+from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.session import frame_source
 from lodprt.version import __version__
 
@@ -74,7 +75,8 @@ def export_frame(store, *, sample: int | None = None, lights=None, colors=None, 
     eye = tuple(eye) if eye is not None else default_eye(store)
     target = tuple(target) if target is not None else scene_centre(store)
     camera = Camera(eye=eye, target=target, up=tuple(up), fov=fov, width=int(size[0]), height=int(size[1]))
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
+    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
+                          interpolation=interpolation)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     return source.update(), source
@@ -201,7 +203,7 @@ def write_glb(frame, out, *, vertex_colors: str = "display", white: float | None
 
 def export_glb(store, out, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
-               error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
+               error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
                vertex_colors: str = "display", white: float | None = None, exposure: float = 0.0,
                overwrite: bool = False) -> dict:
     """``lodprt export``: light ``store`` (a Store or a path; ``sample`` K or point ``lights``), take the view cut
@@ -218,7 +220,7 @@ def export_glb(store, out, *, sample: int | None = None, lights=None, colors=Non
         sample = store.num_samples // 2
     frame, source = export_frame(store, sample=sample, lights=lights, colors=colors, eye=eye, target=target, up=up,
                                  fov=fov, size=size, lod=lod, error_bound=error_bound, alpha=alpha,
-                                 criterion=criterion)
+                                 criterion=criterion, interpolation=interpolation)
     if vertex_colors == "display" and white is None:
         white = getattr(source, "white", None) or auto_white(frame.radiance)
     extras = {"store": str(store.path), "sample": sample, "lod": bool(getattr(source, "lod", False))}

@@ -11,6 +11,7 @@ import time
 import numpy as np
 
 from lodprt.runtime.camera import Camera
+from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.lights import LightInterpolator, check_lights
 
 log = logging.getLogger(__name__)
@@ -50,39 +51,64 @@ def display(radiance_over_white):
     return np.clip(np.asarray(radiance_over_white, np.float64), 0.0, 1.0)
 
 
-def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", outside: str = "clamp"):
+def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", outside: str = "clamp",
+                       interpolation: str = DEFAULT_INTERPOLATION, device: str | None = None):
     """The completed coefficients of every vertex of ``store`` under point lights at (L, 3) positions, without a
-    ``Runtime`` (stores baked without a hierarchy too): T-12 interpolation, T-15 completion, lights summed with
-    their RGB intensities (``colors`` (L, 3) or one (3,) for all; default the bake's). Returns (lights clamped
+    ``Runtime`` (stores baked without a hierarchy too): T-12 weights, T-15 completion, lights summed with their RGB
+    intensities (``colors`` (L, 3) or one (3,) for all; default the bake's). ``interpolation`` "thesis" blends the
+    samples' coefficients (T-12); the "direct" ones add the actual lights' direct term to the blended residuals
+    (M-1..M-4, ``lodprt.runtime.direct_light``; Warp ``device``, default CUDA when present). Returns (lights clamped
     into the sampled region (L, 3), colours (L, 3), coefficients (V, 3, ncoef) float64)."""
+    from lodprt.devices import resolve_device, warp
+    from lodprt.runtime.direct_light import DirectLight, check_interpolation
+
+    check_interpolation(interpolation)
     interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting=weighting,
                                outside=outside)
     pos, col = check_lights(lights, colors, store.intensity)
     pos, _ = interp.clamp(pos)
+    idx, w, _ = interp.weights(pos)
     W = interp.rgb_weights(pos, col)
+    direct = None if interpolation == "thesis" else DirectLight(store, resolve_device(device), interpolation)
     # as wide as the stored coefficients: 1 (y_0 of a diffuse-only store) or order^2
     out = np.zeros((store.num_vertices, 3, store.coefficients_per_vertex))
-    for j in np.flatnonzero(np.abs(W).sum(1) > 0):
+    used = np.flatnonzero(np.abs(W).sum(1) > 0)
+    vis = np.zeros((store.num_vertices, len(used)), np.uint8)
+    for u, j in enumerate(used):
         c = store.coefficients(int(j))  # (V, C, ncoef), completed; C = 1 (grey) broadcasts over R, G, B
+        if direct is not None:
+            vis[:, u], c = direct.split(int(j), c)  # M-2: the residual R_j
         out += c * W[j][None, :, None]
+    if direct is not None:
+        wp = warp()
+        slot = np.full(len(interp.samples), -1, np.int32)
+        slot[used] = np.arange(len(used))
+        ids = direct.referenced
+        arr = wp.array(np.ascontiguousarray(out[ids], np.float32), dtype=wp.float32, device=direct.device)
+        direct.add(ids, pos, col, np.where(w > 0, slot[idx], -1), w,
+                   wp.array(vis, dtype=wp.uint8, device=direct.device), arr)  # M-1
+        out[ids] = arr.numpy()
     return pos, col, out
 
 
-def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp") -> np.ndarray:
+def light_radiance(store, lights, eye, *, colors=None, weighting: str = "exact", outside: str = "clamp",
+                   interpolation: str = DEFAULT_INTERPOLATION) -> np.ndarray:
     """(V, 3) float32 radiance toward ``eye`` of every vertex of ``store`` under point lights (``light_coefficients``;
     ``Runtime.radiance`` gives the same numbers)."""
     from lodprt.store.bake_store import radiance_toward
 
-    _, _, coeffs = light_coefficients(store, lights, colors=colors, weighting=weighting, outside=outside)
+    _, _, coeffs = light_coefficients(store, lights, colors=colors, weighting=weighting, outside=outside,
+                                      interpolation=interpolation)
     return radiance_toward(store.positions, store.normals, coeffs, eye, np.ones(3))
 
 
-def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = None):
+def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = None,
+               interpolation: str = DEFAULT_INTERPOLATION):
     """A ``lodprt.runtime.Frame`` with every referenced vertex of ``store`` and its completed coefficients.
 
     Either ``sample`` (one light exactly at light sample K, that sample's coefficients) or ``lights`` (L, 3)
     positions, each interpolated from its nearest samples (``lodprt.runtime.light_coefficients``: the run time's
-    T-12 weights, clamped into the sampled region). ``colors`` (L, 3) RGB
+    T-12 weights, clamped into the sampled region; ``interpolation`` as there). ``colors`` (L, 3) RGB
     intensities (default the store's); the frame's coefficients carry them (linear radiance).
     """
     from lodprt.store.bake_store import radiance_toward
@@ -96,7 +122,7 @@ def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = 
         lights, colors = check_lights(store.light_positions[sample], colors, store.intensity)
         coeffs = store.coefficients(sample)[ids] * colors[0][None, :, None]
     else:
-        lights, colors, coeffs = light_coefficients(store, lights, colors=colors)
+        lights, colors, coeffs = light_coefficients(store, lights, colors=colors, interpolation=interpolation)
         coeffs = coeffs[ids]
     pos = store.positions[ids].astype(np.float32)
     nrm = store.normals[ids].astype(np.float32)
@@ -113,8 +139,9 @@ class StoreFrames:
 
     lod = False
 
-    def __init__(self, store):
+    def __init__(self, store, interpolation: str = DEFAULT_INTERPOLATION):
         self.store = store
+        self.interpolation = interpolation
         self.white = None
         self.camera = None
         self._lights = store.light_positions[store.num_samples // 2][None, :]
@@ -135,7 +162,8 @@ class StoreFrames:
 
     def update(self):
         t0 = time.perf_counter()
-        frame = full_frame(self.store, self.camera, lights=self._lights, colors=self._colors)
+        frame = full_frame(self.store, self.camera, lights=self._lights, colors=self._colors,
+                           interpolation=self.interpolation)
         if self.white is None:
             self.white = auto_white(frame.radiance)
         frame.stats["ms_total"] = 1e3 * (time.perf_counter() - t0)

@@ -33,7 +33,7 @@ class SampleCache:
     content does (the device copies are refreshed from it).
     """
 
-    def __init__(self, store, *, cache_bytes: int | None = None, progress=None):
+    def __init__(self, store, *, cache_bytes: int | None = None, progress=None, split=None):
         self.store = store
         self.V = store.num_vertices
         self.C = int(store.root.attrs.get("channels", 1))
@@ -43,6 +43,10 @@ class SampleCache:
             raise LodprtError(f"cache_bytes {cache_bytes!r}: must be a whole number of bytes >= 0")
         self.cache_bytes = DEFAULT_CACHE_BYTES if cache_bytes is None else int(cache_bytes)
         self.progress = progress
+        # M-2: split(sample, completed) -> (visibility (V,) uint8, residual (V, C, ncoef)); the slots then hold the
+        # residual and ``visibility`` (V, slots) the sample's visibility states (lodprt.runtime.direct_light)
+        self.split = split
+        self.visibility = np.zeros((self.V, 0), np.uint8)
         self.derived: dict[str, tuple[np.ndarray, typing.Callable]] = {}
         self.slot_sample = np.zeros(0, np.int64)
         self.last_used = np.zeros(0, np.int64)
@@ -54,7 +58,7 @@ class SampleCache:
     # -- size ------------------------------------------------------------------------------------------------
     def bytes_per_slot(self) -> int:
         """Bytes one slot holds: the coefficients and every derived array's row."""
-        per = self.V * self.C * self.n * 4
+        per = self.V * self.C * self.n * 4 + (self.V if self.split is not None else 0)
         for arr, _ in self.derived.values():
             per += arr[:, :1].nbytes
         return per
@@ -65,7 +69,7 @@ class SampleCache:
 
     @property
     def nbytes(self) -> int:
-        return self.coeffs.nbytes + sum(a.nbytes for a, _ in self.derived.values())
+        return self.coeffs.nbytes + self.visibility.nbytes + sum(a.nbytes for a, _ in self.derived.values())
 
     def _capacity(self, need: int) -> int:
         """Slots to hold: at least ``need`` (one frame's samples), as many more as ``cache_bytes`` allows, at most S."""
@@ -82,6 +86,8 @@ class SampleCache:
             return out
 
         self.coeffs = widen(self.coeffs)
+        if self.split is not None:
+            self.visibility = widen(self.visibility)
         self.derived = {k: (widen(a), make) for k, (a, make) in self.derived.items()}
         self.slot_sample = np.concatenate([self.slot_sample, np.full(slots - old, -1, np.int64)])
         self.last_used = np.concatenate([self.last_used, np.full(slots - old, -1, np.int64)])
@@ -118,9 +124,12 @@ class SampleCache:
         c = self.store.complete(sample).astype(np.float32)  # T-15
         if self.slot_sample[slot] >= 0:
             log.debug("sample cache: slot %d: sample %d replaces %d", slot, sample, self.slot_sample[slot])
-        self.coeffs[:, slot] = c
-        for arr, make in self.derived.values():
+        for arr, make in self.derived.values():  # per-node bounds from the sample's radiance, S_j
             arr[:, slot] = make(c)
+        if self.split is not None:
+            vis, c = self.split(sample, c)  # M-2
+            self.visibility[:, slot] = vis
+        self.coeffs[:, slot] = c
         self.slot_sample[slot] = sample
         self.completed += 1
         self.version += 1
@@ -130,8 +139,9 @@ class SampleCache:
         sample held now and for every sample loaded later."""
         if name not in self.derived:
             arr = np.zeros((rows, self.slots) + tuple(shape), dtype)
-            for s in np.flatnonzero(self.slot_sample >= 0):
-                arr[:, s] = make(self.coeffs[:, s])
+            for s in np.flatnonzero(self.slot_sample >= 0):  # from S_j: completed afresh when slots hold R_j
+                c = self.coeffs[:, s] if self.split is None else self.store.complete(int(self.slot_sample[s]))
+                arr[:, s] = make(c.astype(np.float32))
             self.derived[name] = (arr, make)
             self.version += 1
         return self.derived[name][0]

@@ -26,8 +26,9 @@ from lodprt.errors import LodprtError
 from lodprt.runtime import node_bounds
 from lodprt.runtime.camera import Camera, as_camera, clip_planes, view_projection
 from lodprt.runtime.frames import Frame, StoreFrames
-from lodprt.runtime.lights import LightInterpolator, check_lights
-from lodprt.runtime.samples import SampleCache, default_white
+from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
+from lodprt.runtime.relighting import Relighting
+from lodprt.runtime.samples import default_white
 from lodprt.runtime.triangulation import IncrementalTriangulation
 from lodprt.runtime.view_cut import Cut
 
@@ -94,13 +95,18 @@ class Runtime:
     cache_bytes: completed light samples (and their per-node bounds) kept at most, in bytes (default 1 GiB; never
     fewer than one frame's samples): a sample is completed (T-15) when the lights first give it a weight
     (``lodprt.runtime.samples.SampleCache``);
-    progress(done, total): called as the light samples a frame needs are completed.
+    progress(done, total): called as the light samples a frame needs are completed;
+    interpolation: how a light between samples is lit (``lodprt.runtime.direct_light.INTERPOLATIONS``): "direct"
+    (default: the light's direct Phong radiance in closed form, its visibility from the samples where they agree
+    and a shadow ray where they disagree, plus the samples' interpolated residual, M-1..M-3), "direct-blend",
+    "direct-rays", or "thesis" (T-12: the samples' radiance blended).
     """
 
     def __init__(self, store, *, error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
                  pixel_tolerance: float = PIXEL_TOLERANCE, triangle_budget: int | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 1,
-                 lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None):
+                 lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None,
+                 interpolation: str = DEFAULT_INTERPOLATION):
         from lodprt.devices import resolve_device
 
         if criterion not in CRITERIA:
@@ -128,11 +134,12 @@ class Runtime:
             raise LodprtError(f"max_passes {max_passes}: must be >= 1")
         self.max_passes = int(max_passes)
         self.lod = bool(lod)
-        self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
-                                        weighting=weighting, outside=outside)
         self.order = store.sh_order
-        # T-15 per sample when the lights first use it (SPEC 5), float32 slots, vertex-major (V, slots, C, ncoef)
-        self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress)
+        # lights, their samples (T-15 on demand, SampleCache) and the interpolation (T-12 or M-1..M-4)
+        self.lighting = Relighting(store, self.device, interpolation=interpolation, weighting=weighting,
+                                   outside=outside, cache_bytes=cache_bytes, progress=progress)
+        self.interpolation = self.lighting.interpolation
+        self.interp, self.samples = self.lighting.interp, self.lighting.samples
         self.channels, self.ncoef = self.samples.C, self.samples.n
         self.white = float(white) if white is not None else default_white(store)
         if not self.white > 0 or not math.isfinite(self.white):
@@ -305,19 +312,15 @@ class Runtime:
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
         Outside the sampled region: clamped with a warning, or an error (``outside``)."""
-        pos, col = check_lights(positions, colors, self.store.intensity)
-        pos, moved = self.interp.clamp(pos)  # warns (or refuses) once per call
-        W = self.interp.rgb_weights(pos, col)  # lights add (thesis 3.4.1)
+        lit = self.lighting
+        old = lit.weights
+        lit.set_lights(positions, colors)  # completes the samples not held yet (T-15)
+        W = lit.weights
         self._dirty = True
-        old = getattr(self, "sample_weights", None)
         if old is None or old.shape != W.shape or np.abs(W - old).sum() > LIGHT_JUMP * max(np.abs(old).sum(), 1e-30):
             self._refresh_all = True
-        self.light_positions = pos
-        self.light_colors = col
-        self.lights_clamped = int(moved.sum())
-        self.sample_weights = W
-        self.used_samples = np.flatnonzero(np.abs(W).sum(1) > 0)
-        self.used_slots = self.samples.ensure(self.used_samples)  # completes the samples not held yet (T-15)
+        self.light_positions, self.light_colors, self.lights_clamped = lit.positions, lit.colors, lit.clamped
+        self.sample_weights, self.used_samples, self.used_slots = W, lit.used_samples, lit.used_slots
 
     def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
                    near=None, far=None) -> Camera:
@@ -502,6 +505,7 @@ class Runtime:
             "error_bound": float(self.error_bound),
             "alpha": float(self.alpha),
             "lights_clamped": int(self.lights_clamped),
+            "shadow_rays": int(self.lighting.rays),  # M-3: rays cast where the samples disagree
             "ms_cut": 1e3 * (t1 - t0),
             "ms_triangulate": 1e3 * (t2 - t1),
             "ms_relight": 1e3 * (t3 - t2),
@@ -514,7 +518,8 @@ class Runtime:
 
     def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, 3, ncoef) interpolated coefficients and (A, 3) radiance toward the eye of vertices ``vid``
-        (``lodprt.kernels.runtime.relight``)."""
+        (``lodprt.kernels.runtime.relight``; with a direct term, over the samples' residuals, then
+        ``kernels.direct.direct_light``: M-1)."""
         from lodprt.kernels import runtime as kr
 
         wp, dev, d = self._wp, self.device, self._d
@@ -523,23 +528,21 @@ class Runtime:
         rad = wp.empty((A, 3), dtype=wp.float32, device=dev)
         if A:
             used, weights = self._frame_inputs()
+            basis = wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)  # toward the eye, filled by relight
             self._launch(kr.relight, A, [
                 wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), d["positions"], d["normals"],
-                wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"],
-                wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)], [coef, rad])
+                wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"], basis], [coef, rad])
+            self.lighting.add_direct(vid, coef, eye=self.camera.eye, radiance=rad, eye_basis=basis,
+                                     launch=self._launch)  # M-1
         return coef.numpy(), rad.numpy()
 
     # -- full resolution ---------------------------------------------------------------------------------------
     def coefficients(self, vertex_ids=None) -> np.ndarray:
         """(K, 3, ncoef) float32 RGB coefficients of the current lights at ``vertex_ids`` (default: every vertex):
-        ``sum_j W[j, c] C_j`` over the completed light samples (T-12 weights, intensities applied)."""
+        ``sum_j W[j, c] C_j`` over the completed light samples (T-12 weights, intensities applied), plus the
+        direct term of the interpolation (M-1; ``Relighting.coefficients``)."""
         ids = np.arange(self.h.num_vertices) if vertex_ids is None else np.asarray(vertex_ids, np.int64)
-        u = self.used_samples
-        c = self.samples.coeffs[ids[:, None], self.used_slots[None, :]]  # (K, U, C, ncoef)
-        w = self.sample_weights[u].astype(np.float32)  # (U, 3)
-        if self.channels == 1:
-            return np.einsum("kui,uc->kci", c[:, :, 0], w, optimize=True)
-        return np.einsum("kuci,uc->kci", c, w, optimize=True)
+        return self.lighting.coefficients(ids)
 
     def radiance(self, eye) -> np.ndarray:
         """(V, 3) float32 radiance toward ``eye`` of every vertex under the current lights (full resolution,
@@ -558,11 +561,13 @@ class Runtime:
 
 
 def frame_source(store, *, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-                 criterion: str = "screen"):
+                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION):
     """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut; ``lod``
-    False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution)."""
+    False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution); both
+    light a light between samples by ``interpolation`` (``lodprt.runtime.direct_light.INTERPOLATIONS``)."""
     if store.has_hierarchy:
-            return Runtime(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion)
+        return Runtime(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
+                       interpolation=interpolation)
     if lod:
         log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
-    return StoreFrames(store)
+    return StoreFrames(store, interpolation=interpolation)

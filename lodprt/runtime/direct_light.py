@@ -1,0 +1,144 @@
+"""Lights between samples (docs/THEORY.md M-1..M-4, docs/RUNTIME.md "Lights anywhere"): the actual light's direct
+Phong radiance in closed form times its visibility, plus the interpolated residual of the light samples.
+
+    M-1   L(p, s; x) = D(p, s; x) V(p; x) + sum_j w_j R_j(p, s)
+    M-2   R_j(p, s)  = S_j(p, s) - D(p, s; x_j) V_j(p)
+
+``S_j`` is sample j's stored (completed, decoded) radiance and ``V_j`` its visibility, recast here with the bake's
+kernel and ray offset, so that ``R_j`` holds what has no closed form: indirect light (GI stores), the light cut's
+completion error and a codec's error; on a direct-only store it is 0 on every vertex the light cut kept. On a
+sample (``w_j = 1``) M-1 gives back ``S_j`` exactly. Between samples ``D`` follows the actual light (distance,
+N.L, the lobe toward the eye), and ``V`` is the samples' state where they agree and one shadow ray where they
+disagree (M-3), so shadows move with the light instead of cross-fading.
+
+INTERPOLATIONS names the run-time lighting paths: ``"direct"`` (default, M-1 with M-3), ``"direct-blend"`` (M-1
+with the samples' visibility blended by the weights, no rays: M-4), ``"direct-rays"`` (M-1 with a shadow ray for
+every vertex) and ``"thesis"`` (T-12: the samples' radiance blended).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lodprt.errors import LodprtError
+
+INTERPOLATIONS = ("direct", "direct-blend", "direct-rays", "thesis")
+DEFAULT_INTERPOLATION = "direct"
+
+
+def check_interpolation(name: str) -> str:
+    """``name`` when it is one of INTERPOLATIONS, else LodprtError naming the choices."""
+    if name not in INTERPOLATIONS:
+        raise LodprtError(f"interpolation {name!r}: choose one of {', '.join(INTERPOLATIONS)}")
+    return name
+
+
+class DirectLight:
+    """The scene of a bake store on a Warp device, for the direct term of M-1: BVH, materials, the bake's ray
+    offset and falloff. ``split(sample, S)`` makes a sample's visibility and residual (M-2); ``add`` adds
+    ``D V`` of the current lights to coefficients (and radiance) of a set of vertices."""
+
+    def __init__(self, store, device: str, interpolation: str = DEFAULT_INTERPOLATION):
+        from lodprt.devices import warp
+        from lodprt.kernels import direct as kdirect
+        from lodprt.precompute.baker import material_tables
+
+        check_interpolation(interpolation)
+        if interpolation == "thesis":
+            raise LodprtError("DirectLight: the thesis interpolation has no direct term")
+        wp = warp()
+        self.wp, self.device, self.store = wp, device, store
+        self.mode = {"direct": kdirect.AGREE_OR_RAY, "direct-blend": kdirect.BLEND, "direct-rays": kdirect.RAYS}[
+            interpolation]
+        scene = store.scene()
+        self.scene = scene
+        self.ncoef = store.coefficients_per_vertex
+        self.channels = int(store.root.attrs.get("channels", 1))
+        order = store.sh_order
+        tables = material_tables(scene, order, 3)
+        stored = material_tables(scene, order, self.channels)  # the bake's tables
+        v3 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.vec3, device=device)  # noqa: E731
+        self.points = v3(scene.positions)
+        self.normals = v3(scene.normals)
+        self.indices = wp.array(np.ascontiguousarray(scene.faces, np.int32).ravel(), dtype=wp.int32, device=device)
+        self.mesh = wp.Mesh(points=self.points, indices=self.indices)
+        self.material_id = wp.array(scene.material_id.astype(np.int32), dtype=wp.int32, device=device)
+        f32 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.float32, device=device)  # noqa: E731
+        self.kd, self.ks, self.zonal = f32(tables["kd"]), f32(tables["ks"]), f32(tables["zonal"])
+        self.kd_stored = f32(stored["kd"])  # the store's channels: the residual is in the store's layout
+        self.offset = float(store.attrs["ray_offset"])  # the bake's, so that V_j is the bake's visibility
+        self.falloff = 1 if scene.lights.falloff == "inverse-square" else 0
+        self.radius = float(scene.lights.radius)
+        self.referenced = np.flatnonzero(store.referenced).astype(np.int32)
+        self.ref_ids = wp.array(self.referenced, dtype=wp.int32, device=device)
+        self.num_vertices = store.num_vertices
+
+    # -- per sample (M-2) ----------------------------------------------------------------------------------------
+    def split(self, sample: int, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(visibility (V,) uint8, residual (V, C, ncoef) float32) of light sample ``sample`` whose completed
+        coefficients are ``coeffs`` (V, C, ncoef): the bake's shadow rays and Phong SH (kernels.visibility,
+        kernels.shading), unreferenced vertices BACK_FACING with their coefficients as given."""
+        from lodprt.kernels import shading as kshade
+        from lodprt.kernels import visibility as kvis
+
+        wp, dev = self.wp, self.device
+        light = wp.vec3(*map(float, self.store.light_positions[sample]))
+        K = len(self.referenced)
+        vis = wp.zeros(K, dtype=wp.uint8, device=dev)
+        wp.launch(kvis.shadow_rays, dim=K, inputs=[self.mesh.id, self.points, self.normals, self.ref_ids, light,
+                                                    self.offset], outputs=[vis], device=dev)
+        direct = wp.zeros((K, self.channels, self.ncoef), dtype=wp.float32, device=dev)
+        order = self.store.sh_order
+        wp.launch(kshade.phong_sh, dim=K, inputs=[self.points, self.normals, self.material_id, self.ref_ids, vis,
+                                                  self.kd_stored, self.ks, self.zonal, light, self.falloff,
+                                                  self.radius, wp.zeros((K, order * order), dtype=wp.float32,
+                                                                        device=dev)],
+                  outputs=[direct], device=dev)
+        states = np.full(self.num_vertices, int(kvis.BACK_FACING), np.uint8)
+        states[self.referenced] = vis.numpy()
+        residual = np.asarray(coeffs, np.float32).copy()
+        residual[self.referenced] -= direct.numpy()
+        return states, residual
+
+    # -- per frame (M-1) -----------------------------------------------------------------------------------------
+    def add(self, vid, lights, colors, light_slots, light_weights, sample_vis, coeffs, *, eye=None, radiance=None,
+            eye_basis=None, threads=None) -> int:
+        """Add ``D V`` of (L, 3) ``lights`` with (L, 3) ``colors`` to ``coeffs`` (A, 3, ncoef) (Warp array, rows
+        aligned with ``vid``) and, with ``eye``, to ``radiance`` (A, 3) toward it. ``light_slots`` (L, K) are the
+        columns of ``sample_vis`` (V, S) uint8 (Warp array) holding each light's samples, ``light_weights`` (L, K)
+        their weights; ``eye_basis`` (A, >= ncoef), when given, already holds the SH basis toward the eye per row
+        (``kernels.runtime.relight``'s scratch). ``threads``: a callable ``(kernel, rows, inputs, outputs)`` that launches split over rows
+        with the first row as the kernel's offset (default: one launch). Returns the shadow rays cast."""
+        from lodprt.kernels import direct as kdirect
+
+        wp, dev = self.wp, self.device
+        A = len(vid)
+        if A == 0 or len(lights) == 0:
+            return 0
+        ncoef = coeffs.shape[2]
+        with_rad = radiance is not None
+        rad = radiance if with_rad else wp.zeros((1, 3), dtype=wp.float32, device=dev)
+        rays = wp.zeros(A, dtype=wp.int32, device=dev)
+        e = np.zeros(3) if eye is None else np.asarray(eye, np.float64)
+        inputs = [
+            wp.array(np.asarray(vid, np.int32), dtype=wp.int32, device=dev), self.points, self.normals,
+            self.material_id, self.kd, self.ks, self.zonal, self.falloff, self.radius, self.mesh.id, self.offset,
+            wp.array(np.asarray(lights, np.float32), dtype=wp.vec3, device=dev),
+            wp.array(np.asarray(colors, np.float32), dtype=wp.vec3, device=dev),
+            wp.array(np.ascontiguousarray(light_slots, np.int32), dtype=wp.int32, device=dev),
+            wp.array(np.ascontiguousarray(light_weights, np.float32), dtype=wp.float32, device=dev),
+            sample_vis, int(self.mode), wp.vec3(*map(float, e)), int(with_rad), int(eye_basis is not None),
+            wp.empty((A, ncoef), dtype=wp.float32, device=dev),
+            eye_basis if eye_basis is not None else wp.empty((A, ncoef), dtype=wp.float32, device=dev),
+        ]
+        outputs = [coeffs, rad, rays]
+        if threads is None:
+            wp.launch(kdirect.direct_light, dim=A, inputs=[0] + inputs, outputs=outputs, device=dev)
+        else:
+            threads(kdirect.direct_light, A, inputs, outputs)
+        return int(rays.numpy().sum())
+
+
+def slots_of(idx: np.ndarray, slot_of_sample) -> np.ndarray:
+    """(L, K) int32 cache slots of the (L, K) sample indices ``idx`` (``slot_of_sample``: sample -> slot)."""
+    return np.vectorize(lambda s: slot_of_sample[int(s)], otypes=[np.int32])(idx) if idx.size else idx.astype(np.int32)

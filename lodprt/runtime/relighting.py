@@ -1,0 +1,106 @@
+"""Relighting of the run time (SPEC 5; thesis 3.4.1, T-12, T-15, T-7; M-1..M-4): the current point lights, the
+light samples they use (completed on demand, ``SampleCache``) and the per-vertex coefficients and radiance of a
+set of vertices under them, by the chosen interpolation (``lodprt.runtime.direct_light.INTERPOLATIONS``):
+
+* ``"direct"`` (default) and its variants: the actual light's direct radiance in closed form times its visibility,
+  plus the interpolated residual of the samples (M-1, M-2; ``kernels.direct.direct_light`` after
+  ``kernels.runtime.relight`` over the residuals);
+* ``"thesis"``: the samples' radiance blended by the T-12 weights (``kernels.runtime.relight``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION, DirectLight, check_interpolation
+from lodprt.runtime.lights import LightInterpolator, check_lights
+from lodprt.runtime.samples import SampleCache
+
+
+class Relighting:
+    """Lights, light samples and relighting over one bake store on one Warp device.
+
+    After ``set_lights``: ``positions`` (L, 3) and ``colors`` (L, 3) as used (clamped), ``clamped`` how many were
+    moved into the sampled region, ``weights`` (S, 3) every sample's RGB weight (lights summed), ``used_samples``
+    the samples with a weight and ``used_slots`` the cache slots holding them, ``light_samples`` / ``light_weights``
+    (L, k) each light's nearest samples and their T-12 weights.
+    """
+
+    def __init__(self, store, device: str, *, interpolation: str = DEFAULT_INTERPOLATION, weighting: str = "exact",
+                 outside: str = "clamp", cache_bytes: int | None = None, progress=None):
+        self.store, self.device = store, device
+        self.interpolation = check_interpolation(interpolation)
+        self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
+                                        weighting=weighting, outside=outside)
+        self.direct = None if interpolation == "thesis" else DirectLight(store, device, interpolation)
+        # T-15 per sample when the lights first use it (SPEC 5), float32 slots, vertex-major (V, slots, C, ncoef);
+        # with a direct term the slots hold each sample's residual R_j and its visibility (M-2)
+        self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress,
+                                   split=None if self.direct is None else self.direct.split)
+        self.channels, self.ncoef = self.samples.C, self.samples.n
+        self.weights = None
+        self.rays = 0  # shadow rays the last relight cast (M-3)
+        self._vis = None  # device copy of the samples' visibility and the cache version it holds
+        self._vis_version = -1
+
+    def set_lights(self, positions, colors=None) -> None:
+        """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each);
+        outside the sampled region clamped with a warning, or an error (``outside``)."""
+        pos, col = check_lights(positions, colors, self.store.intensity)
+        pos, moved = self.interp.clamp(pos)  # warns (or refuses) once per call
+        idx, w, _ = self.interp.weights(pos)
+        W = np.zeros((len(self.interp.samples), 3))
+        np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))  # lights add (thesis 3.4.1)
+        self.positions, self.colors, self.clamped = pos, col, int(moved.sum())
+        self.light_samples, self.light_weights = idx, w
+        self.weights = W
+        self.used_samples = np.flatnonzero(np.abs(W).sum(1) > 0)
+        self.used_slots = self.samples.ensure(self.used_samples)  # completes the samples not held yet (T-15)
+
+    def light_slots(self) -> np.ndarray:
+        """(L, k) int32 the cache slot of each light's samples, -1 where the sample has no weight: the samples whose
+        visibility decides the light's (M-3, M-4)."""
+        slot = np.full(len(self.interp.samples), -1, np.int32)
+        slot[self.used_samples] = self.used_slots
+        return np.where(self.light_weights > 0, slot[self.light_samples], -1).astype(np.int32)
+
+    def visibility_array(self):
+        """The samples' visibility (V, slots) uint8 on the device, as the cache holds it now."""
+        from lodprt.devices import warp
+
+        if self._vis_version != self.samples.version:
+            wp, dev = warp(), self.device
+            self._vis = wp.array(self.samples.visibility, dtype=wp.uint8, device=dev, copy=dev != "cpu")
+            self._vis_version = self.samples.version
+        return self._vis
+
+    def add_direct(self, vid, coeffs, *, eye=None, radiance=None, eye_basis=None, launch=None) -> None:
+        """M-1: add the direct term of the current lights to ``coeffs`` (A, 3, ncoef) of vertices ``vid`` (Warp
+        arrays; and to ``radiance`` (A, 3) toward ``eye``, with ``eye_basis`` the basis toward it when known);
+        ``launch`` splits the kernel over rows."""
+        if self.direct is None:
+            return
+        self.rays = self.direct.add(vid, self.positions, self.colors, self.light_slots(), self.light_weights,
+                                    self.visibility_array(), coeffs, eye=eye, radiance=radiance, eye_basis=eye_basis,
+                                    threads=launch)
+
+    def coefficients(self, vertex_ids) -> np.ndarray:
+        """(K, 3, ncoef) float32 RGB coefficients of the current lights at ``vertex_ids``: ``sum_j W[j, c] C_j``
+        over the completed light samples (T-12 weights, intensities applied), plus the direct term (M-1)."""
+        from lodprt.devices import warp
+
+        ids = np.asarray(vertex_ids, np.int64)
+        c = self.samples.coeffs[ids[:, None], self.used_slots[None, :]]  # (K, U, C, ncoef)
+        w = self.weights[self.used_samples].astype(np.float32)  # (U, 3)
+        if self.channels == 1:
+            out = np.einsum("kui,uc->kci", c[:, :, 0], w, optimize=True)
+        else:
+            out = np.einsum("kuci,uc->kci", c, w, optimize=True)
+        ref = self.store.referenced[ids] if self.direct is not None else np.zeros(len(ids), bool)
+        if ref.any():  # a vertex no face uses reads 0: no direct term either
+            wp = warp()
+            arr = wp.array(np.ascontiguousarray(out[ref], np.float32), dtype=wp.float32, device=self.device)
+            self.add_direct(ids[ref].astype(np.int32), arr)
+            out[ref] = arr.numpy()
+        return out
+

@@ -1,0 +1,255 @@
+"""Lights between samples (M-1..M-4, docs/RUNTIME.md "Lights anywhere"): the default interpolation lights a point
+light between samples as well as one on a sample. Oracles: the closed form ``kd (N.L) I E(d)``, the float64 Embree
+bake of ``lodprt.precompute.reference`` at the actual light, and exact identities (a light on a sample gives the
+sample back; several lights add; the thesis path is the T-12 sum of the completed samples)."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodprt.errors import LodprtError
+
+#: sample cell spacing of the scenes below: a 3 x 1 x 3 grid over a 0.6-wide box
+BOX = (-0.3, 1.4, -0.3, 0.3, 1.6, 0.3)
+
+
+def grid_plane(n: int, size: float) -> trimesh.Trimesh:
+    """An n x n vertex grid in the y = 0 plane, side ``size``, centred on the origin, facing +y."""
+    t = np.linspace(-size / 2, size / 2, n)
+    x, z = np.meshgrid(t, t, indexing="ij")
+    v = np.c_[x.ravel(), np.zeros(n * n), z.ravel()]
+    i = np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]
+    a, b, c, d = i.ravel(), i.ravel() + n, i.ravel() + n + 1, i.ravel() + 1
+    return trimesh.Trimesh(v, np.r_[np.c_[a, d, c], np.c_[a, c, b]], process=False)
+
+
+def bake_grid(folder, objects: dict, *, ks=0.0, shininess=8.0, kd="0.6", threshold=5.0, order=4,
+              falloff="inverse-square", bounces=0, box=BOX):
+    """Bake ``objects`` (name -> trimesh) under a 3 x 1 x 3 light grid in ``box``: (scene, store)."""
+    from lodprt.model.scene import load_scene
+    from lodprt.precompute.bake import bake
+    from lodprt.store.bake_store import open_store
+
+    lines = []
+    for name, mesh in objects.items():
+        mesh.export(folder / f"{name}.obj")
+        lines += ["[[object]]", f'mesh = "{name}.obj"', f"ks = {ks}", f"shininess = {shininess}", f"kd = {kd}"]
+    lines += ["[lights]", "grid = [3, 1, 3]", f"box = {list(box)}", f'falloff = "{falloff}"']
+    (folder / "s.toml").write_text("\n".join(lines) + "\n")
+    scene = load_scene(folder / "s.toml")
+    bake(scene, folder / "s.zarr", sh_order=order, device="cpu", threshold_deg=threshold, bounces=bounces,
+         gi_rays=64)
+    return scene, open_store(folder / "s.zarr")
+
+
+def unshadowed(scene, light) -> np.ndarray:
+    """The closed form kd (N.L) E(d) (unit intensity, grey kd of material 0) of every vertex (float64)."""
+    to = light[None, :] - scene.positions
+    d = np.linalg.norm(to, axis=1)
+    cos = np.clip((scene.normals * to).sum(1) / d, 0, None)
+    e = 1 / np.maximum(d, scene.lights.radius) ** 2 if scene.lights.falloff == "inverse-square" else 1.0
+    return scene.materials[0].kd[0] * cos * e
+
+
+def exact(scene, store, light, eye) -> np.ndarray:
+    """Float64 Embree bake at ``light`` toward ``eye``, channel 0, unit intensity (lodprt.precompute.reference)."""
+    from lodprt.precompute import reference
+    from lodprt.store.bake_store import radiance_toward
+
+    vis = reference.visibility(reference.EmbreeCaster(scene), scene, light, float(store.attrs["ray_offset"]))
+    order = store.sh_order if store.coefficients_per_vertex > 1 else 1
+    c = reference.phong_coefficients(scene, light, order, vis)
+    return radiance_toward(scene.positions, scene.normals, c[:, None, :], eye, np.ones(3))[:, 0]
+
+
+def runtime_radiance(store, light, eye, interpolation, **kw) -> np.ndarray:
+    from lodprt.runtime.session import Runtime
+
+    rt = Runtime(store, device=kw.pop("device", "cpu"), lod=False, interpolation=interpolation, **kw)
+    rt.set_lights(np.asarray(light, np.float64).reshape(-1, 3), colors=np.ones(3))
+    return rt.radiance(eye)[:, 0]
+
+
+@pytest.fixture(scope="module")
+def plane(tmp_path_factory):
+    """A lit 61 x 61 plane, nothing over it, diffuse; light-cut and full-resolution bakes."""
+    folder = tmp_path_factory.mktemp("plane")
+    cut = bake_grid(folder, {"plane": grid_plane(61, 2.0)})
+    full_folder = tmp_path_factory.mktemp("plane-full")
+    return cut, bake_grid(full_folder, {"plane": grid_plane(61, 2.0)}, threshold=None)
+
+
+@pytest.fixture(scope="module")
+def box_shadow(tmp_path_factory):
+    """A 0.3-wide box floating over a 121 x 121 plane (vertex spacing 1/60), diffuse, light-cut bake."""
+    box = trimesh.creation.box((0.3, 0.1, 0.3))
+    box.apply_translation((0.0, 0.4, 0.0))
+    return bake_grid(tmp_path_factory.mktemp("box"), {"plane": grid_plane(121, 2.0), "box": box})
+
+
+@pytest.mark.warp_debug
+def test_unshadowed_plane_between_samples_equals_the_closed_form(plane, device):
+    """Full-resolution store: a light between samples equals kd (N.L) I / d^2 to float32 precision (the thesis
+    blend is off by percent); light-cut store: the error between samples is the completion error on a sample."""
+    (scene_c, cut), (scene_f, full) = plane
+    eye = np.array([0.2, 1.0, 1.5])
+    between = np.array([0.1, 1.47, 0.1])  # halfway between four samples, below their layer
+    want = unshadowed(scene_f, between)
+    got = runtime_radiance(full, between, eye, "direct", device=device)
+    np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-6 * want.max())
+    thesis = runtime_radiance(full, between, eye, "thesis", device=device)
+    assert np.abs(thesis - want).max() > 0.01 * want.max()  # the test tells the two apart
+    # light cut: completion error, the same between samples as on them
+    on_err = max(np.abs(runtime_radiance(cut, p, eye, "direct", device=device) - unshadowed(scene_c, p)).max()
+                 / unshadowed(scene_c, p).max() for p in cut.light_positions.astype(np.float64))
+    err = np.abs(runtime_radiance(cut, between, eye, "direct", device=device) - unshadowed(scene_c, between)).max()
+    assert err / unshadowed(scene_c, between).max() <= 1.5 * on_err + 1e-5
+
+
+@pytest.mark.warp_debug
+def test_specular_between_samples_equals_the_float64_bake(tmp_path):
+    """A glossy plane (Phong n = 8, SH order 4) under a light between samples: the run time's radiance toward the
+    eye equals the float64 Embree bake at that light (same SH projection), for both direct modes with rays."""
+    scene, store = bake_grid(tmp_path, {"plane": grid_plane(41, 2.0)}, ks=0.3, threshold=None)
+    eye = np.array([0.3, 0.8, 1.2])
+    light = np.array([-0.13, 1.55, 0.07])
+    want = exact(scene, store, light, eye)
+    for mode in ("direct", "direct-rays"):
+        got = runtime_radiance(store, light, eye, mode)
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5 * want.max(), err_msg=mode)
+
+
+def shadow_profile(scene, store, light, rad, caster, offset):
+    """(dark (V,) from ``rad``, exact shadow (V,), distance of each plane vertex to the exact shadow edge)."""
+    from lodprt.kernels.visibility import SHADOWED
+    from lodprt.precompute import reference
+    from scipy.spatial import cKDTree
+
+    plane = scene.object_id == 0
+    vis = reference.visibility(caster, scene, light, offset)
+    shadow = vis == SHADOWED
+    u = unshadowed(scene, light)
+    ratio = np.where(u > 0, rad / np.where(u > 0, u, 1), 0)
+    e = scene.faces[np.isin(scene.faces, np.flatnonzero(plane)).all(1)]
+    edges = np.r_[e[:, [0, 1]], e[:, [1, 2]], e[:, [2, 0]]]
+    cross = edges[shadow[edges[:, 0]] != shadow[edges[:, 1]]].ravel()
+    dist = cKDTree(scene.positions[np.unique(cross)]).query(scene.positions)[0]
+    return ratio, shadow, np.where(plane, dist, np.inf)
+
+
+@pytest.mark.parametrize("interpolation", ["direct", "direct-rays", "direct-blend", "thesis"])
+def test_box_shadow_moves_with_the_light(box_shadow, interpolation):
+    """The light crosses a sample cell in small steps: at every step one shadow (no vertex half dark farther than
+    one vertex spacing from the exact edge: no ghost edge) whose edge lies within one spacing of where the
+    geometry puts it. T-12 (thesis) and M-4 (direct-blend) cross-fade the samples' shadows and must fail this."""
+    from lodprt.precompute import reference
+    from lodprt.runtime.session import Runtime
+
+    scene, store = box_shadow
+    caster = reference.EmbreeCaster(scene)
+    offset = float(store.attrs["ray_offset"])
+    spacing = 2.0 / 120
+    rt = Runtime(store, device="cpu", lod=False, interpolation=interpolation)
+    eye = np.array([0.0, 2.0, 0.5])
+    worst = 0.0
+    for t in np.linspace(0.0, 1.0, 6):
+        light = np.array([0.2 * t, 1.5, 0.1])  # from sample (0, 0) over the cell's middle to sample (0.2, 0)
+        rt.set_lights(light[None], colors=np.ones(3))
+        ratio, shadow, dist = shadow_profile(scene, store, light, rt.radiance(eye)[:, 0], caster, offset)
+        near = dist <= 1.01 * spacing
+        ghost = (ratio > 0.1) & (ratio < 0.9) & ~near & np.isfinite(dist)
+        wrong = ((ratio < 0.5) != shadow) & ~near & np.isfinite(dist)
+        worst = max(worst, ghost.sum() + wrong.sum())
+        if interpolation in ("direct", "direct-rays"):
+            assert not ghost.any(), f"light {light}: {ghost.sum()} half-dark vertices away from the edge"
+            assert not wrong.any(), f"light {light}: {wrong.sum()} vertices on the wrong side of the edge"
+    if interpolation in ("direct-blend", "thesis"):
+        assert worst > 50  # the cross-fade of shadows (of the radiance or of the visibility): the oracle sees it
+
+
+def test_a_light_on_a_sample_gives_the_sample_back(box_shadow):
+    """M-1 on a sample (w = 1): the direct path returns the stored, completed sample (the thesis path's value)."""
+    scene, store = box_shadow
+    eye = np.array([0.1, 1.0, 1.0])
+    for k in (0, 4, 7):
+        p = store.light_positions[k].astype(np.float64)
+        got = runtime_radiance(store, p, eye, "direct")
+        want = runtime_radiance(store, p, eye, "thesis")
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+
+
+def test_several_coloured_lights_add(box_shadow):
+    """Two coloured lights between samples: the coefficients are the sum of each light alone, channel by
+    channel (M-1 is linear in the light's intensity)."""
+    from lodprt.runtime.session import Runtime
+
+    _, store = box_shadow
+    rt = Runtime(store, device="cpu", lod=False)
+    a, b = np.array([0.07, 1.52, -0.11]), np.array([-0.17, 1.45, 0.13])
+    ca, cb = np.array([1.0, 0.5, 0.2]), np.array([0.1, 0.3, 0.9])
+    rt.set_lights(np.stack([a, b]), colors=np.stack([ca, cb]))
+    both = rt.coefficients()
+    rt.set_lights(a[None], colors=ca)
+    one = rt.coefficients()
+    rt.set_lights(b[None], colors=cb)
+    two = rt.coefficients()
+    np.testing.assert_allclose(both, one + two, rtol=1e-5, atol=1e-6 * np.abs(both).max())
+    assert np.abs(both[:, 0] - both[:, 2]).max() > 0  # the colours reach the channels
+
+
+def test_light_coefficients_match_the_runtime(box_shadow):
+    """``light_coefficients`` (no Runtime, any store) and ``Runtime.coefficients`` give the same numbers for a
+    light between samples, both interpolations; the thesis path is exactly the T-12 sum of completed samples."""
+    from lodprt.runtime.frames import light_coefficients
+    from lodprt.runtime.lights import LightInterpolator
+    from lodprt.runtime.session import Runtime
+
+    _, store = box_shadow
+    light = np.array([[0.11, 1.5, 0.09]])
+    for mode in ("direct", "direct-blend", "thesis"):
+        rt = Runtime(store, device="cpu", lod=False, interpolation=mode)
+        rt.set_lights(light)
+        _, _, free = light_coefficients(store, light, interpolation=mode, device="cpu")
+        np.testing.assert_allclose(free, rt.coefficients(), rtol=1e-4, atol=1e-6 * np.abs(free).max(),
+                                   err_msg=mode)
+    interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"])
+    W = interp.rgb_weights(light, store.intensity[None])
+    want = np.zeros_like(free)
+    for j in np.flatnonzero(np.abs(W).sum(1) > 0):
+        want += store.coefficients(int(j)) * W[j][None, :, None]
+    np.testing.assert_array_equal(free, want)  # thesis: bit for bit the T-12 sum
+
+
+@pytest.mark.warp_debug
+def test_gi_and_compressed_stores_go_through_the_direct_path(box_shadow, tmp_path):
+    """A GI store (1 bounce) and a q8-compressed store: on a sample M-1 gives the (decoded) sample back, and
+    between samples the indirect light survives (the direct path's radiance exceeds the exact direct light on
+    the plane's shadow, where only indirect light arrives)."""
+    from lodprt.store.bake_store import open_store
+    from lodprt.store.compress import compress_store
+
+    box = trimesh.creation.box((0.3, 0.1, 0.3))
+    box.apply_translation((0.0, 0.4, 0.0))
+    scene, gi = bake_grid(tmp_path, {"plane": grid_plane(41, 2.0), "box": box}, bounces=1)
+    compress_store(box_shadow[1].path, tmp_path / "q8.zarr", codec="q8")
+    eye = np.array([0.1, 1.0, 1.0])
+    for store in (gi, open_store(tmp_path / "q8.zarr")):
+        p = store.light_positions[4].astype(np.float64)
+        want = runtime_radiance(store, p, eye, "thesis")
+        np.testing.assert_allclose(runtime_radiance(store, p, eye, "direct"), want, rtol=1e-4,
+                                   atol=1e-5 * np.abs(want).max())
+    light = np.array([0.1, 1.5, 0.1])
+    got = runtime_radiance(gi, light, eye, "direct")
+    direct = exact(scene, gi, light, eye)
+    dark = (scene.object_id == 0) & (direct == 0) & (scene.positions[:, 1] > -1)
+    assert dark.any() and np.median(got[dark]) > 0  # indirect light in the shadow
+
+
+def test_unknown_interpolation_is_a_clear_error(box_shadow):
+    from lodprt.runtime.frames import light_coefficients
+    from lodprt.runtime.session import Runtime
+
+    with pytest.raises(LodprtError, match="interpolation 'linear': choose one of direct"):
+        Runtime(box_shadow[1], device="cpu", interpolation="linear")
+    with pytest.raises(LodprtError, match="interpolation"):
+        light_coefficients(box_shadow[1], [(0, 1.5, 0)], interpolation="nearest")
