@@ -1,11 +1,13 @@
 """Mesh groups for the hierarchy build, and pymeshlab's chained QEM halvings (SPEC 3; thesis 3.2).
 
 ``mesh_groups`` gives the groups ``lodprt.model.hierarchy_build`` builds independently (connected components, split
-further by ``component``). ``pymeshlab_chain`` / ``pymeshlab_levels`` decimate each group level after level with
-``optimalplacement=False`` (survivors keep their original, bit-identical positions; levels are nested) and give the
-level at which each vertex disappears; ``representative_scores`` reads from two consecutive levels which survivor
-gained a removed vertex's edges. The build no longer uses them (one pymeshlab halving alone needs about 2.3 KB per
-vertex, docs/SCALE.md); they stay as the reference QEM decimation for comparisons. Details: docs/HIERARCHY.md.
+further by ``component``). ``halvings`` decimates one mesh level after level with ``optimalplacement=False``
+(survivors keep their original, bit-identical positions; levels are nested), optionally with locked vertices; the
+pymeshlab build seeds its rounds with it (``lodprt.model.hierarchy_pymeshlab``). ``pymeshlab_chain`` /
+``pymeshlab_levels`` run it on whole groups and give the level at which each vertex disappears;
+``representative_scores`` reads from two consecutive levels which survivor gained a removed vertex's edges: the
+reference QEM decimation for comparisons (one halving of a whole mesh needs about 2.3 KB per vertex,
+docs/SCALE.md). Details: docs/HIERARCHY.md.
 """
 
 from __future__ import annotations
