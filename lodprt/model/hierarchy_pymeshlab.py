@@ -121,7 +121,9 @@ def _run(parts: list, target_base: int, keep_boundary: bool, workers: int | None
 def serve() -> None:
     """The worker loop (``python -m lodprt.model.hierarchy_pymeshlab``): a part from stdin, its
     ``decimate_part`` result to stdout, until stdin closes."""
-    src, dst = sys.stdin.buffer, sys.stdout.buffer
+    src = sys.stdin.buffer
+    dst = os.fdopen(os.dup(1), "wb")  # the results' pipe; anything else printed (pymeshlab's C++ too) goes to stderr
+    os.dup2(2, 1)
     while True:
         try:
             part, target_base, keep_boundary = pickle.load(src)
