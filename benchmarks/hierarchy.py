@@ -1,94 +1,193 @@
-"""Vertex hierarchy build: time, peak memory and shape, against pymeshlab's plain QEM decimation in the same run.
+"""Vertex hierarchy builds compared on the same meshes in the same run: the rounds build (default) against the
+pymeshlab-seeded build (``build_hierarchy(method="pymeshlab")``), and pymeshlab's plain QEM decimation.
 
-    python benchmarks/hierarchy.py [--quick] [--json PATH]
+    python benchmarks/hierarchy.py [--quick] [--json PATH] [--device cpu|cuda]
 
-Peak memory is the process's peak resident set after each build (cumulative, so an upper bound for later rows).
-Meshes: the shared Stanford bunny on a 380 x 380 floor (180,347 vertices), spot and fandisk (quick: the bunny on a
-60 x 60 floor). Baseline: pymeshlab decimating the same mesh straight to the hierarchy's base size, one call.
+Meshes: the shared Stanford bunny on a 380 x 380 floor (180,347 vertices, the main case), spot and fandisk (quick:
+the bunny on a 60 x 60 floor). Every build runs in a fresh child process (``python benchmarks/hierarchy.py --child
+METHOD MESH``), which reports:
+
+* ``build s``: ``build_hierarchy``'s own time; ``B/vertex``: the child's peak resident memory (``VmHWM``) above its
+  resident size just before the build, per vertex; ``worker MiB``: the largest peak of the pymeshlab worker
+  processes (``RUSAGE_CHILDREN``; fresh interpreters, so Python, numpy and pymeshlab's own ~100 MiB included; at
+  most ``workers`` of them run at once);
+* ``roots``, ``depth``: the base mesh and the tree's height;
+* ``light cut``: vertices the 5-degree light cut keeps, mean over the light samples (the bake's default; the
+  bunny scene's 3 x 1 x 3 grid, quick 2 x 1 x 1), from a bake of the scene with that hierarchy (SH order 4);
+* ``view tris`` and ``PSNR``: the run time's view cut at its default bound (screen criterion), converged, from one
+  view (``default_eye``, 400 x 300, light on the middle sample), triangles drawn and PSNR against the full mesh
+  (``lodprt.display.compare.frame_error``). Not triangles at equal PSNR: one bound, one view, both builds.
+
+``pymeshlab 1p`` is the pymeshlab build on one process (build only); ``QEM only`` is pymeshlab decimating the
+whole scene straight to the rounds build's base size in one call (time only). Writes
+benchmarks/results/hierarchy[-quick].json and .png.
 """
 
 from __future__ import annotations
 
+import json
 import resource
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, thesis_scene, write
+from common import MODELS, environment, parser, plot_path, table, write
+
+FULL = ("bunny380", "spot", "fandisk")
+QUICK = ("bunny60",)
 
 
-def meshes(quick: bool):
+def scene_of(name: str):
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
-    if quick:
+    if name.startswith("bunny"):
+        floor = int(name[5:])
         pos, faces = load_mesh(MODELS / "stanford-bunny.obj")
-        yield "bunny + 60x60 floor", assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (60, 1.0, THESIS_MATERIAL),
-                                                    {}, "l", "q")
-        return
-    yield "bunny + 380x380 floor", thesis_scene(quick=False)
-    for name in ("spot", "fandisk"):
-        pos, faces = load_mesh(MODELS / f"{name}.obj")
-        yield name, assemble_scene([(name, pos, faces, THESIS_MATERIAL)], None, {}, "l", name)
+        grid = [3, 1, 3] if floor >= 380 else [2, 1, 1]
+        return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (floor, 1.0, THESIS_MATERIAL),
+                              {"grid": grid}, "lights", f"bunny + {floor}x{floor} floor")
+    pos, faces = load_mesh(MODELS / f"{name}.obj")
+    return assemble_scene([(name, pos, faces, THESIS_MATERIAL)], (60, 1.0, THESIS_MATERIAL), {"grid": [3, 1, 3]},
+                          "lights", f"{name} + 60x60 floor")
 
 
-def pymeshlab_baseline(scene, target_vertices: int) -> float:
+def _status(key: str) -> int:
+    """VmRSS (resident now) or VmHWM (peak of this process) in bytes."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def view_numbers(store, device: str) -> dict:
+    """Triangles and PSNR of the converged default-bound view cut from the default eye (module docstring)."""
+    from lodprt.display.compare import frame_error
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.camera import Camera, default_eye, scene_centre
+    from lodprt.runtime.frames import full_frame
+    from lodprt.runtime.session import Runtime
+
+    cam = Camera(eye=default_eye(store), target=scene_centre(store), width=400, height=300)
+    light = store.light_positions[store.num_samples // 2][None]
+    rt = Runtime(store, device=device)
+    rt.set_lights(light)
+    rt.set_camera(cam)
+    lod = rt.update(max_passes=10_000)
+    full = full_frame(store, cam, lights=light)
+    with Renderer() as renderer:
+        psnr = frame_error(renderer, lod, full, rt.white)[0]["psnr_db"]
+    return {"view_triangles": len(lod.triangles), "full_triangles": len(full.triangles), "psnr_db": float(psnr)}
+
+
+def child(method: str, name: str, device: str) -> dict:
+    """One build (and, but for ``pymeshlab-1p``, its bake and view) in this fresh process."""
+    from lodprt.model.hierarchy_build import build_hierarchy
+
+    scene = scene_of(name)
+    build_hierarchy(scene.positions[:3], np.array([[0, 1, 2]]), scene.normals[:3])  # first-use imports
+    if method.startswith("pymeshlab"):
+        import pymeshlab  # noqa: F401  (its import, about 30 MiB, is not the build's memory)
+    before = _status("VmRSS")
+    workers = 1 if method == "pymeshlab-1p" else None
+    h = build_hierarchy(scene.positions, scene.faces, scene.normals, method=method.split("-")[0], workers=workers)
+    out = {"method": method, "mesh": scene.source, "vertices": scene.num_vertices, "build_s": h.build_seconds,
+           "bytes_per_vertex": (_status("VmHWM") - before) / scene.num_vertices,
+           "worker_mib": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+           "roots": len(h.roots), "depth": h.depth, "rounds": h.levels, "nodes": h.num_nodes}
+    if method == "pymeshlab-1p":
+        return out
+    from lodprt.precompute.bake import bake
+    from lodprt.store.bake_store import open_store
+
+    with tempfile.TemporaryDirectory(prefix="lodprt-hierarchy-") as tmp:
+        path = Path(tmp) / "scene.zarr"
+        t = time.perf_counter()
+        res = bake(scene, path, sh_order=4, device=device, threshold_deg=5.0, tree=h)
+        out["bake_s"] = time.perf_counter() - t
+        out["light_cut_vertices"] = float(np.mean([s["vertices_kept"] for s in res.samples]))
+        out.update(view_numbers(open_store(path), device))
+    return out
+
+
+def qem_only(name: str, target_vertices: int) -> float:
+    """pymeshlab decimating the whole scene to ``target_vertices`` (about 2 faces each) in one call: seconds."""
     import pymeshlab
 
+    scene = scene_of(name)
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=scene.positions, face_matrix=scene.faces))
     t = time.perf_counter()
     ms.meshing_decimation_quadric_edge_collapse(targetfacenum=max(2 * target_vertices, 8), optimalplacement=False,
-                                                preservetopology=True, preserveboundary=True)
+                                                preservetopology=True)
     return time.perf_counter() - t
 
 
-def main():
-    args = parser(__doc__.splitlines()[0]).parse_args()
-    from lodprt.model.hierarchy_build import build_hierarchy
+def run_child(method: str, name: str, device: str) -> dict:
+    cmd = [sys.executable, __file__, "--child", method, name, "--device", device]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode:
+        sys.exit(f"{' '.join(cmd)} failed:\n{done.stderr[-4000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
-    rows = []
-    for name, scene in meshes(args.quick):
-        h = build_hierarchy(scene.positions, scene.faces, scene.normals)
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # process peak so far (Linux: KiB)
-        base = pymeshlab_baseline(scene, len(h.roots))
-        rows.append({
-            "mesh": name,
-            "vertices": scene.num_vertices,
-            "triangles": len(scene.faces),
-            "nodes": h.num_nodes,
-            "roots": len(h.roots),
-            "depth": h.depth,
-            "levels": h.levels,
-            "build_s": h.build_seconds,
-            "pymeshlab_s": base,
-            "ratio": h.build_seconds / base,
-            "peak_mib": peak / 2**20,
-            "bytes_per_node": h.nbytes / h.num_nodes,
-        })
-        print(f"{name}: {h.build_seconds:.1f} s", flush=True)
-    print(table(rows, [("mesh", "mesh", "s"), ("vertices", "vertices", ","), ("nodes", "nodes", ","), ("roots", "roots", ","),
-                       ("depth", "depth", "d"), ("build_s", "build s", ".2f"), ("pymeshlab_s", "pymeshlab s", ".2f"),
-                       ("ratio", "x pymeshlab", ".1f"), ("peak_mib", "peak RSS MiB", ".0f"),
-                       ("bytes_per_node", "B/node", ".1f")]))
-    name = "hierarchy" + ("-quick" if args.quick else "")
-    print("wrote", write(name, {"benchmark": "hierarchy", "quick": args.quick, "environment": environment("cpu"),
-                                "rows": rows}, args.json))
+
+def plot(rows: list[dict], name: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 3.5))
-    y = np.arange(len(rows))
-    ax.barh(y + 0.2, [r["build_s"] for r in rows], 0.4, label="lodprt hierarchy (rounds of half-edge collapses)")
-    ax.barh(y - 0.2, [r["pymeshlab_s"] for r in rows], 0.4, label="pymeshlab QEM to the same base size")
-    ax.set_yticks(y, [f"{r['mesh']}\n{r['vertices']:,} v" for r in rows])
-    ax.set_xlabel("seconds")
-    ax.set_title("Vertex hierarchy build")
-    ax.legend(fontsize=8)
+    meshes = list(dict.fromkeys(r["mesh"] for r in rows))
+    methods = ("rounds", "pymeshlab")
+    panels = (("build_s", "build seconds"), ("bytes_per_vertex", "peak bytes / vertex (main process)"),
+              ("light_cut_vertices", "5-degree light cut: vertices kept"), ("view_triangles", "view cut triangles"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(14, 3.2))
+    y = np.arange(len(meshes))
+    for ax, (key, title) in zip(axes, panels):
+        for j, m in enumerate(methods):
+            vals = [next((r.get(key, 0) for r in rows if r["mesh"] == me and r["method"] == m), 0) for me in meshes]
+            ax.barh(y + (0.2 if j == 0 else -0.2), vals, 0.4, label=m)
+        ax.set_yticks(y, meshes if ax is axes[0] else [""] * len(meshes), fontsize=7)
+        ax.set_title(title, fontsize=9)
+    axes[0].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(plot_path(name), dpi=120)
+    fig.savefig(plot_path(name), dpi=110)
     print("wrote", plot_path(name))
+
+
+def main():
+    if "--child" in sys.argv:
+        i = sys.argv.index("--child")
+        device = sys.argv[sys.argv.index("--device") + 1] if "--device" in sys.argv else "cpu"
+        print(json.dumps(child(sys.argv[i + 1], sys.argv[i + 2], device)))
+        return
+    args = parser(__doc__.splitlines()[0]).parse_args()
+    from lodprt.devices import resolve_device
+
+    device = resolve_device(args.device)
+    rows = []
+    for name in QUICK if args.quick else FULL:
+        methods = ("rounds", "pymeshlab") + (("pymeshlab-1p",) if name == "bunny380" else ())
+        for method in methods:
+            rows.append(run_child(method, name, device))
+            r = rows[-1]
+            print(f"{r['mesh']} {method}: {r['build_s']:.1f} s, {r['roots']:,} roots", flush=True)
+        rounds = next(r for r in rows if r["mesh"] == rows[-1]["mesh"] and r["method"] == "rounds")
+        rows.append({"method": "QEM only", "mesh": rounds["mesh"], "vertices": rounds["vertices"],
+                     "build_s": qem_only(name, rounds["roots"])})
+    print(table(rows, [("mesh", "mesh", "s"), ("method", "build", "s"), ("vertices", "vertices", ","),
+                       ("build_s", "build s", ".2f"), ("bytes_per_vertex", "B/vertex", ".0f"),
+                       ("worker_mib", "worker MiB", ".0f"), ("roots", "roots", ","), ("depth", "depth", "d"),
+                       ("light_cut_vertices", "light cut", ",.0f"), ("view_triangles", "view tris", ","),
+                       ("full_triangles", "full tris", ","), ("psnr_db", "PSNR dB", ".1f")]))
+    name = "hierarchy" + ("-quick" if args.quick else "")
+    print("wrote", write(name, {"benchmark": "hierarchy", "quick": args.quick, "environment": environment(device),
+                                "rows": rows}, args.json))
+    plot(rows, name)
 
 
 if __name__ == "__main__":

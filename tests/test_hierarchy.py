@@ -32,10 +32,8 @@ def face_normals(pos, tri):
     return np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]])
 
 
-def test_leaves_roots_and_binary_nodes(scene, hier):
-    """Leaves are exactly the original vertices, every internal node has two children, roots are the base mesh."""
-    h = hier
-    V = scene.num_vertices
+def check_forest(h, V, referenced):
+    """A binary forest over the V original vertices made of half-edge collapses (an oracle other tests reuse)."""
     assert (h.children[:V] == -1).all()
     assert (h.children[V:] >= 0).all() and (h.children[V:, 0] != h.children[V:, 1]).all()
     # each node is the child of at most one parent, and children were created before their parent
@@ -43,37 +41,61 @@ def test_leaves_roots_and_binary_nodes(scene, hier):
     assert len(np.unique(kids)) == len(kids)
     assert (kids < np.repeat(np.arange(V, h.num_nodes), 2)).all()
     np.testing.assert_array_equal(h.parent[h.children[V:, 0]], np.arange(V, h.num_nodes))
+    np.testing.assert_array_equal(h.parent[h.children[V:, 1]], np.arange(V, h.num_nodes))
     # half-edge collapses: the parent stands where its first child stands, at an original vertex
     np.testing.assert_array_equal(h.vertex[V:], h.vertex[h.children[V:, 0]])
     np.testing.assert_array_equal(h.vertex[:V], np.arange(V))
+    np.testing.assert_array_equal(h.creation, np.arange(h.num_nodes))
     assert h.num_nodes == 2 * V - len(h.roots)
-    unref = np.flatnonzero(~scene.referenced)
+    unref = np.flatnonzero(~referenced)
     assert (h.parent[unref] == -1).all()  # unreferenced vertices are isolated roots
-    assert len(h.roots) < V / 10
 
 
-def test_leaf_normals_inside_every_ancestor_cone(scene, hier):
+def check_cones(h, normals):
     """Every leaf normal lies inside the normal cone of each of its ancestors (to 1e-5 rad)."""
-    h = hier
     axis = h.cone_axis.astype(np.float64)
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    idx = np.arange(scene.num_vertices)
+    idx = np.arange(h.num_vertices)
     cur = h.parent[idx].astype(np.int64)
     while (cur >= 0).any():
         live = cur >= 0
         i, c = idx[live], cur[live]
-        a, n = axis[c], scene.normals[i]
+        a, n = axis[c], normals[i]
         ang = np.arctan2(np.linalg.norm(np.cross(a, n), axis=1), (a * n).sum(1))  # well conditioned near 0
         assert (ang <= h.cone_half_angle[c] + 1e-5).all()
         cur = np.where(live, h.parent[np.maximum(cur, 0)], -1)
 
 
+def check_radii(h, positions, nodes):
+    """The bounding sphere of each of ``nodes`` holds every leaf position below it (leaves from a parent walk)."""
+    up = np.arange(h.num_vertices)
+    below = {int(k): [] for k in nodes}
+    cur = up.copy()
+    while (cur >= 0).any():
+        for k in np.intersect1d(cur, nodes):
+            below[int(k)].extend(up[cur == k].tolist())
+        cur = np.where(cur >= 0, h.parent[np.maximum(cur, 0)], -1)
+    for k, leaves in below.items():
+        assert sorted(leaves) == sorted(h.leaves(k).tolist())
+        d = np.linalg.norm(positions[leaves] - positions[h.vertex[k]], axis=1)
+        assert d.max() <= h.radius[k] * (1 + 1e-6) + 1e-12
+
+
+def test_leaves_roots_and_binary_nodes(scene, hier):
+    """Leaves are exactly the original vertices, every internal node has two children, roots are the base mesh."""
+    check_forest(hier, scene.num_vertices, scene.referenced)
+    assert len(hier.roots) < scene.num_vertices / 10
+
+
+def test_leaf_normals_inside_every_ancestor_cone(scene, hier):
+    """Every leaf normal lies inside the normal cone of each of its ancestors (to 1e-5 rad)."""
+    check_cones(hier, scene.normals)
+
+
 def test_radius_covers_leaves(scene, hier):
     """The bounding sphere of sampled nodes holds every leaf position below them."""
-    h = hier
-    for k in np.random.default_rng(0).choice(np.arange(scene.num_vertices, h.num_nodes), 300, replace=False):
-        d = np.linalg.norm(scene.positions[h.leaves(k)] - scene.positions[h.vertex[k]], axis=1)
-        assert d.max() <= h.radius[k] * (1 + 1e-6) + 1e-12
+    nodes = np.random.default_rng(0).choice(np.arange(scene.num_vertices, hier.num_nodes), 300, replace=False)
+    check_radii(hier, scene.positions, nodes)
 
 
 def test_full_cut_triangulates_to_original_and_base_is_valid(scene, hier):
@@ -324,15 +346,14 @@ def wavy_grid(n, lift=0.0, seed=0):
     return pos, np.r_[np.c_[a, a + 1, a + n], np.c_[a + 1, a + n + 1, a + n]]
 
 
-def test_creation_order_is_a_legal_sequence_of_collapses():
-    """Replayed one by one in creation order on a plain Python mesh (sets of faces), every collapse of the
-    round-parallel build is a legal half-edge collapse of the mesh as it stands then: u and v adjacent, the link
-    condition, a boundary vertex moving along a boundary edge only (the default build collapses the rim), the
-    survivor's valence within bounds, no face turned over or made a sliver, the recorded neighbours are v's, and
-    the error vector is v's offset from the closest point of the faces around u (float64 brute force)."""
-    pos, faces = wavy_grid(24)
-    h = build(pos, faces)
+def replay_collapses(pos, faces, h, *, error_vectors=True):
+    """Replay ``h``'s collapses one by one in creation order on a plain Python mesh (sets of faces) and check each
+    is a legal half-edge collapse of the mesh as it stands then: u and v adjacent, the link condition, a boundary
+    vertex moving along a boundary edge only, the survivor's valence within bounds, no face turned over or made a
+    sliver, the recorded neighbours are v's, and (``error_vectors``) the error vector is v's offset from the closest
+    point of the faces around u (float64 brute force). The oracle of every build (test_hierarchy_pymeshlab too)."""
     V = len(pos)
+    faces = np.asarray(faces)
     F = {tuple(f) for f in faces.tolist()}
     at = {x: set() for x in range(V)}
     for f in F:
@@ -365,6 +386,8 @@ def test_creation_order_is_a_legal_sequence_of_collapses():
             F.add(g)
             for x in g:
                 at[x].add(g)
+        if not error_vectors:
+            continue
         # figure 10 by brute force: closest point of p_v on the faces around u, densely sampled barycentrics
         # (a lattice of step 1/40 in barycentric coordinates is within (|ab| + |ac|) / 40 of every point)
         p = pos[v]
@@ -378,6 +401,14 @@ def test_creation_order_is_a_legal_sequence_of_collapses():
             slack = max(slack, (np.linalg.norm(b - a) + np.linalg.norm(c - a)) / 40)
         e = np.linalg.norm(h.error_vector[k])
         assert best - slack - 1e-6 <= e <= best + 1e-6
+
+
+def test_creation_order_is_a_legal_sequence_of_collapses():
+    """Replayed one by one in creation order on a plain Python mesh, every collapse of the round-parallel build is
+    a legal half-edge collapse of the mesh as it stands then (``replay_collapses``; the default build collapses
+    the rim)."""
+    pos, faces = wavy_grid(24)
+    replay_collapses(pos, faces, build(pos, faces))
 
 
 def flat_grid(n, tilt=0.0):

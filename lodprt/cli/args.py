@@ -51,6 +51,15 @@ def add_jobs(p: argparse.ArgumentParser, each: str) -> None:
     p.add_argument("--jobs", type=int, default=None, metavar="J", help=f"CPU threads, {each} (default: all cores)")
 
 
+def add_hierarchy_method(p: argparse.ArgumentParser) -> None:
+    """``--hierarchy rounds|pymeshlab``: the vertex hierarchy's build (``build_hierarchy(method=...)``)."""
+    from lodprt.model.hierarchy_build import METHODS
+
+    p.add_argument("--hierarchy", default=METHODS[0], metavar="METHOD",
+                   help=f"vertex hierarchy build: {' or '.join(METHODS)} (default {METHODS[0]}: rounds of parallel "
+                   "QEM collapses; pymeshlab: the same rounds replaying pymeshlab's QEM halvings, docs/HIERARCHY.md)")
+
+
 def add_json(p: argparse.ArgumentParser, what: str = "a JSON object") -> None:
     """``--json``: machine-readable output instead of the text."""
     p.add_argument("--json", action="store_true", help=f"print {what}")

@@ -16,6 +16,7 @@ examples:
   lodprt bake demo -o demo.zarr
   lodprt bake scene.toml -o bunny.zarr --sh-order 4 --overwrite
   lodprt bake scene.toml -o bunny_gi.zarr --bounces 2 --gi-rays 128 --threshold-deg 0.5   (docs/GI.md)
+  lodprt bake scene.toml -o bunny.zarr --hierarchy pymeshlab   (docs/HIERARCHY.md)
   lodprt bake scene.toml -o bunny.zarr --resume          (after a killed bake)
   lodprt bake finer.toml -o bunny.zarr --add-samples     (finer.toml: the same scene, a finer light grid)
   lodprt -v bake scene.toml -o bunny.zarr --workers 4    (dask; -v prints the dashboard link)
@@ -45,6 +46,7 @@ def register(sub) -> None:
     b.add_argument("--full", action="store_true", help="keep every vertex (no light cut)")
     cli_args.add_jobs(b, "one light sample each")
     b.add_argument("--no-hierarchy", action="store_true", help="skip the vertex hierarchy (implies --full: no light cut, no LOD later)")
+    cli_args.add_hierarchy_method(b)
     b.add_argument("--resume", action="store_true",
                    help="continue an interrupted bake of OUT (same scene and settings, checked against what it "
                    "recorded): keep its finished samples and bake the rest; a finished OUT is left as it is")
@@ -91,6 +93,9 @@ def cmd_bake(args) -> int:
     from lodprt.store.codecs import parse_codec
 
     parse_codec(args.compress, "--compress")  # a bad codec fails before any work
+    from lodprt.model.hierarchy_build import check_method
+
+    check_method(args.hierarchy)  # and so does an unknown hierarchy build
     device = resolve_device(args.device)  # refuse an unavailable device before loading anything
     scene = load_scene(args.scene)
     n = scene.lights.positions.shape[0]
@@ -108,6 +113,7 @@ def cmd_bake(args) -> int:
             overwrite=args.overwrite,
             jobs=args.jobs,
             hierarchy=not args.no_hierarchy,
+            hierarchy_method=args.hierarchy,
             threshold_deg=None if args.full or args.no_hierarchy else args.threshold_deg,
             progress=bars.callback("bake", "sample"),
             hierarchy_progress=bars.callback("hierarchy", "collapse"),
@@ -135,6 +141,9 @@ def _bake_environment(args) -> int:
                           "bake-environment --bounces")
     if args.compress != "none":
         raise LodprtError("--compress is a point-light option; the transfer store of --environment has no codec")
+    if args.hierarchy != "rounds":
+        raise LodprtError("--hierarchy is a point-light option; an environment bake builds its hierarchy with "
+                          "bake-environment --lod-threshold (rounds)")
     if args.full or args.no_hierarchy:
         raise LodprtError("--full and --no-hierarchy are point-light options; an environment bake has no light "
                           "cut (see bake-environment --lod-threshold)")

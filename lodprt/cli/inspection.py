@@ -59,7 +59,7 @@ def cmd_info(args) -> int:
     )
     if info["hierarchy_nodes"] is not None:
         print(f"  hierarchy {info['hierarchy_nodes']:,} nodes, {info['hierarchy_roots']:,} roots, depth "
-              f"{info['hierarchy_depth']}, built in {info['hierarchy_seconds']:.1f} s")
+              f"{info['hierarchy_depth']}, built ({info['hierarchy_method']}) in {info['hierarchy_seconds']:.1f} s")
     print(f"  bake {info['bake_seconds']:.2f} s on {info['device']}; {info['bytes_total'] / 1024:,.0f} KiB payload, "
           f"{info['bytes_on_disk'] / 1024:,.0f} KiB on disk")
     n = max(len(info["samples"]), 1)

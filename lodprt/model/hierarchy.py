@@ -48,6 +48,7 @@ class Hierarchy:
     leaf_range: np.ndarray
     levels: int = 0
     build_seconds: float = 0.0
+    method: str = "rounds"  # the build that made it (``hierarchy_build.METHODS``)
 
     ARRAYS = (
         "parent",

@@ -36,6 +36,16 @@ CONE_SLACK = 1e-6
 MIN_ROUND = 1e-2
 #: the build stops after at most this many rounds (a bound only: it stops long before, docs/HIERARCHY.md)
 MAX_ROUNDS = 2000
+#: the builds ``build_hierarchy(method=...)`` offers: rounds of parallel QEM collapses in numpy (the default), or
+#: the same rounds replaying pymeshlab's chained QEM halvings level by level (docs/HIERARCHY.md)
+METHODS = ("rounds", "pymeshlab")
+
+
+def check_method(method) -> str:
+    """``method`` when it is one of ``METHODS``; LodprtError naming the choices otherwise."""
+    if method not in METHODS:
+        raise LodprtError(f"hierarchy method {method!r}: choose one of {', '.join(METHODS)}")
+    return method
 
 
 def _checked_inputs(positions, faces, normals, component, target_base):
@@ -192,18 +202,31 @@ class _Nodes:
         return h
 
 
-def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, total) -> int:
+def _next_phase(st: CollapseRounds, phases: int) -> bool:
+    """Move a seeded build to its next phase (after the last level: the plain rounds, ``phase`` None); False when
+    the plain rounds are done."""
+    if st.phase is None:
+        return False
+    st.phase = st.phase + 1 if st.phase < phases else None
+    return True
+
+
+def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, total, phases: int = 0) -> int:
     """Rounds of collapses (rule H-R) until every group is at its base size, a round makes no collapse (then no
     movable vertex has a legal move: ``CollapseRounds.select``) or only the tail is left (``MIN_ROUND``); returns
-    the rounds."""
+    the rounds. A seeded build (``phases`` levels, ``CollapseRounds.seed``) runs these rounds once per level, the
+    vertices removed by that level collapsing into its survivors, then once more unrestricted."""
     cur = {"axis": normals[st.gid].copy(), "half": np.zeros(st.n), "radius": np.zeros(st.n),
            "height": np.zeros(st.n, np.int32)}
     rounds = 0
     size = st.n
+    st.phase = 1 if phases else None
     for _ in range(MAX_ROUNDS):
         st.finish_groups(target_base)
-        movable = np.count_nonzero(st.movable)
+        movable = np.count_nonzero(st.due())
         if not movable:
+            if _next_phase(st, phases):
+                continue
             break
         if st.n > 64 and (st.n - np.count_nonzero(np.bincount(st.faces.ravel(), minlength=st.n))) * 2 > size:
             cur = st.compact(cur)
@@ -211,6 +234,8 @@ def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, t
         src, dst, count, start, keys = st.adjacency()
         v, u = st.select(src, dst, count, start, keys)
         if not len(v):
+            if _next_phase(st, phases):
+                continue
             break
         nb_count = start[v + 1] - start[v]
         nb = dst[concat_ranges(start[v], start[v + 1])]  # v's neighbours before the collapse, sorted
@@ -218,7 +243,8 @@ def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, t
         tris, tri_count = st.apply(v, u)
         nodes.add(st, cur, v, u, nb_count, nb, tris, tri_count)
         rounds += 1
-        if len(v) < MIN_ROUND * movable:  # the tail: a whole round over the live mesh for next to nothing
+        # the tail: a whole round over the live mesh for next to nothing
+        if len(v) < MIN_ROUND * movable and not _next_phase(st, phases):
             break
         log.debug("hierarchy round %d: %d collapses, %d faces left", rounds, len(v), len(st.faces))
         if progress is not None:
@@ -235,6 +261,8 @@ def build_hierarchy(
     target_base: int = 64,
     keep_boundary: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    method: str = "rounds",
+    workers: int | None = None,
 ) -> Hierarchy:
     """Build the binary vertex hierarchy of a triangle mesh (module docstring, docs/HIERARCHY.md).
 
@@ -248,8 +276,12 @@ def build_hierarchy(
     ``progress(done, total)`` reports collapses made against the number of vertices that may collapse. Open
     boundaries, several components, non-manifold edges, duplicated vertices and faces with a repeated corner are
     accepted; unreferenced vertices become isolated roots. Raises LodprtError naming the bad input otherwise.
+    ``method``: ``"rounds"`` (the default) orders the collapses by the rounds' own QEM costs; ``"pymeshlab"``
+    replays pymeshlab's chained QEM halvings (``lodprt.model.hierarchy_pymeshlab``, on ``workers`` processes:
+    default every core) level by level with the same rounds, collapses and node attributes (docs/HIERARCHY.md).
     """
     t0 = time.perf_counter()
+    check_method(method)
     positions, faces, normals, comp = _checked_inputs(positions, faces, normals, component, target_base)
     V = len(positions)
     # faces with a repeated corner carry no area or orientation: they take no part in the collapses
@@ -257,6 +289,12 @@ def build_hierarchy(
     work = faces[good] if not good.all() else faces
     del good
     group = mesh_groups(V, work, comp).astype(np.int32)
+    seed, phases = None, 0
+    if method == "pymeshlab":  # before the quadrics: pymeshlab's peak and the rounds' do not add up
+        from lodprt.model.hierarchy_pymeshlab import removal_levels
+
+        seed, phases = removal_levels(positions, work, group, target_base=int(target_base),
+                                      keep_boundary=keep_boundary, workers=workers)
     quadric, boundary, frozen = _topology(positions, work)
     used = np.zeros(V, bool)
     used[work.ravel()] = True
@@ -266,10 +304,14 @@ def build_hierarchy(
     st = CollapseRounds(np.arange(V, dtype=np.int32), positions, quadric, boundary, frozen, movable, group,
                         np.ascontiguousarray(work), split=component is not None)
     del quadric, boundary, frozen, movable, group, used
-    levels = _rounds(st, nodes, normals, int(target_base), progress, total)
+    if seed is not None:
+        st.seed(seed)
+        del seed
+    levels = _rounds(st, nodes, normals, int(target_base), progress, total, phases)
     del st
     hier = nodes.hierarchy(levels)
     hier.build_seconds = time.perf_counter() - t0
-    log.info("hierarchy: %d vertices, %d nodes, %d roots, depth %d, %d rounds, %.1f s", V, hier.num_nodes,
-             len(hier.roots), hier.depth, levels, hier.build_seconds)
+    hier.method = method
+    log.info("hierarchy (%s): %d vertices, %d nodes, %d roots, depth %d, %d rounds (%d pymeshlab levels), %.1f s",
+             method, V, hier.num_nodes, len(hier.roots), hier.depth, levels, phases, hier.build_seconds)
     return hier

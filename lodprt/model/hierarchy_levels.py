@@ -1,11 +1,13 @@
 """Mesh groups for the hierarchy build, and pymeshlab's chained QEM halvings (SPEC 3; thesis 3.2).
 
 ``mesh_groups`` gives the groups ``lodprt.model.hierarchy_build`` builds independently (connected components, split
-further by ``component``). ``pymeshlab_chain`` / ``pymeshlab_levels`` decimate each group level after level with
-``optimalplacement=False`` (survivors keep their original, bit-identical positions; levels are nested) and give the
-level at which each vertex disappears; ``representative_scores`` reads from two consecutive levels which survivor
-gained a removed vertex's edges. The build no longer uses them (one pymeshlab halving alone needs about 2.3 KB per
-vertex, docs/SCALE.md); they stay as the reference QEM decimation for comparisons. Details: docs/HIERARCHY.md.
+further by ``component``). ``halvings`` decimates one mesh level after level with ``optimalplacement=False``
+(survivors keep their original, bit-identical positions; levels are nested), optionally with locked vertices; the
+pymeshlab build seeds its rounds with it (``lodprt.model.hierarchy_pymeshlab``). ``pymeshlab_chain`` /
+``pymeshlab_levels`` run it on whole groups and give the level at which each vertex disappears;
+``representative_scores`` reads from two consecutive levels which survivor gained a removed vertex's edges: the
+reference QEM decimation for comparisons (one halving of a whole mesh needs about 2.3 KB per vertex,
+docs/SCALE.md). Details: docs/HIERARCHY.md.
 """
 
 from __future__ import annotations
@@ -32,25 +34,31 @@ def mesh_groups(V: int, faces: np.ndarray, component: np.ndarray | None = None) 
     return connected_components(g, directed=False)[1].astype(np.int64)
 
 
-def _chain_one(positions: np.ndarray, faces: np.ndarray, target_base: int, max_levels: int,
-               keep_boundary: bool) -> list[np.ndarray]:
-    """Chained pymeshlab halvings of one group (faces in original ids), level 1 first, in original ids."""
+def halvings(positions: np.ndarray, faces: np.ndarray, *, target_base: int, max_levels: int, keep_boundary: bool,
+             locked: np.ndarray | None = None):
+    """Chained pymeshlab QEM halvings of one mesh (positions (n, 3), faces (F, 3) local ids, every vertex used):
+    yields the faces (F_L, 3) int64, in the same local ids, after each level, level 1 first.
+
+    ``optimalplacement=False``: survivors keep their original, bit-identical positions, so every level is a set of
+    half-edge collapses of the one before; the vertex scalar carries the id through ``autoclean``'s renumbering
+    (exact below 2^53). ``locked`` (n,) bool: vertices no collapse may remove or move (a tile's border): only
+    faces whose three corners are free are selected and simplified (``selected=True``). Stops at ``target_base``
+    faces, when a halving removes less than 10% of the faces, or when pymeshlab refuses the mesh (logged)."""
     import pymeshlab
 
-    ids = np.unique(faces)
+    n = len(positions)
+    ids = np.arange(n, dtype=np.float64)
     ms = pymeshlab.MeshSet()
-    ms.add_mesh(
-        pymeshlab.Mesh(
-            vertex_matrix=np.ascontiguousarray(positions[ids], np.float64),
-            face_matrix=np.searchsorted(ids, faces).astype(np.int32),
-            v_scalar_array=ids.astype(np.float64),  # original ids survive autoclean's renumbering (exact below 2^53)
-        )
-    )
-    out: list[np.ndarray] = []
+    scalar = ids if locked is None else np.where(locked, -(ids + 1), ids)  # a locked id is stored as -(id + 1)
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.ascontiguousarray(positions, np.float64),
+                               face_matrix=np.ascontiguousarray(faces, np.int32), v_scalar_array=scalar))
     nf = len(faces)
-    for _ in range(max_levels):
+    for level in range(max_levels):
         if nf <= target_base:
             break
+        if locked is not None:  # faces with all three corners free (inclusive: every corner selected)
+            ms.compute_selection_by_condition_per_vertex(condselect="(q >= 0)")
+            ms.compute_selection_transfer_vertex_to_face(inclusive=True)
         try:
             ms.meshing_decimation_quadric_edge_collapse(
                 targetfacenum=max(nf // 2, target_base),
@@ -60,18 +68,28 @@ def _chain_one(positions: np.ndarray, faces: np.ndarray, target_base: int, max_l
                 planarquadric=True,  # flat regions (the floor) thin out evenly instead of vanishing at once
                 qualitythr=0.3,  # 0 stalls (REFERENCES.md)
                 autoclean=True,
+                selected=locked is not None,
             )
         except Exception as exc:  # pymeshlab.PyMeshLabException on meshes it cannot handle
-            log.warning("pymeshlab decimation stopped after %d levels: %s", len(out), exc)
+            log.warning("pymeshlab decimation stopped after %d levels: %s", level, exc)
             break
         mesh = ms.current_mesh()
-        vid = np.rint(mesh.vertex_scalar_array()).astype(np.int64)
+        q = np.rint(mesh.vertex_scalar_array()).astype(np.int64)
+        vid = np.where(q >= 0, q, -q - 1)
         new_nf = mesh.face_number()
-        out.append(vid[mesh.face_matrix()] if new_nf else np.zeros((0, 3), np.int64))
+        yield vid[mesh.face_matrix()] if new_nf else np.zeros((0, 3), np.int64)
         if new_nf > 0.9 * nf:
             break
         nf = new_nf
-    return out
+
+
+def _chain_one(positions: np.ndarray, faces: np.ndarray, target_base: int, max_levels: int,
+               keep_boundary: bool) -> list[np.ndarray]:
+    """Chained pymeshlab halvings of one group (faces in original ids), level 1 first, in original ids."""
+    ids = np.unique(faces)
+    local = np.searchsorted(ids, faces)
+    return [ids[f] for f in halvings(positions[ids], local, target_base=target_base, max_levels=max_levels,
+                                     keep_boundary=keep_boundary)]
 
 
 def pymeshlab_chain(

@@ -35,6 +35,9 @@ CLASS_STEP = 2.0
 #: moves costed at once (bounds the temporaries of a round to a few MB)
 CHUNK = 1 << 16
 
+#: the removal level of a vertex the seeding decimation never removed (above every phase)
+NEVER = np.iinfo(np.int32).max
+
 # the 10 entries of a symmetric 4 x 4 quadric (row, column), upper triangle
 QUADRIC_ENTRIES = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
 
@@ -105,6 +108,21 @@ class CollapseRounds:
         self.node = gid.copy()
         self.faces = faces
         self.tie = position_hash(pos)
+        self.level = None  # (n,) int32 removal level of a seeded build (``seed``), None for the plain rounds
+        self.phase = None  # the level being replayed (None: every movable vertex may move anywhere)
+
+    def seed(self, level: np.ndarray) -> None:
+        """Seed the rounds with an external decimation order (``build_hierarchy(method="pymeshlab")``): ``level``
+        (n,) int32, the level at which the decimation removed each vertex (``NEVER``: it never did). While
+        ``phase`` is a level L, only vertices removed at a level <= L move, and only into vertices that survive
+        level L (docs/HIERARCHY.md, "pymeshlab build")."""
+        self.level = np.asarray(level, np.int32)
+
+    def due(self) -> np.ndarray:
+        """(n,) bool the vertices that may collapse now: movable, and removed by the seed's current phase."""
+        if self.phase is None:
+            return self.movable
+        return self.movable & (self.level <= self.phase)
 
     @property
     def n(self) -> int:
@@ -119,6 +137,8 @@ class CollapseRounds:
         self.faces = new[self.faces]
         for name in ("gid", "pos", "quadric", "tie", "boundary", "frozen", "movable", "group", "node"):
             setattr(self, name, getattr(self, name)[used])
+        if self.level is not None:
+            self.level = self.level[used]
         return {k: a[used] for k, a in extra.items()}
 
     def adjacency(self):
@@ -151,8 +171,10 @@ class CollapseRounds:
         vertex order (one segment per vertex, any order within), cost (K,) float64, seg_start (S + 1,) int64 and
         seg_vertex (S,) int32, the vertex of each segment."""
         v, u = src, dst
-        ok = self.movable[v]
+        ok = self.due()[v]
         ok &= ~self.frozen[u]
+        if self.phase is not None:  # a seeded phase L: targets survive level L
+            ok &= self.level[u] > self.phase
         if self.split:  # groups split by ``component`` may touch; connected components never do
             ok &= self.group[v] == self.group[u]
         ok &= count == 2 - self.boundary[v]  # boundary vertices move along boundary edges only (one face)

@@ -166,13 +166,15 @@ def bake(
     add_samples: bool = False,
     workers: int | None = None,
     scheduler: str | None = None, compress: str = "none",
+    hierarchy_method: str = "rounds",
 ) -> BakeResult:
     """Bake light samples of ``scene`` and write the store at ``out``.
 
     ``threshold_deg=None`` bakes every referenced vertex (full resolution); a number bakes, per sample, only the
     vertices of the light-dependent cut with that incident-angle threshold (``lodprt.precompute.light_cut``; needs the hierarchy).
     With ``hierarchy`` the vertex hierarchy (``lodprt.model.hierarchy_build``) is built first (or ``tree`` is used) and
-    stored under ``hierarchy/``.
+    stored under ``hierarchy/``; ``hierarchy_method`` picks its build (``build_hierarchy(method=...)``: "rounds",
+    the default, or "pymeshlab"; docs/HIERARCHY.md).
     ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample,
     ``hierarchy_progress(collapses, total)`` while the hierarchy is built.
     Raises StoreError before any work when ``out`` exists and ``overwrite`` is false.
@@ -186,10 +188,7 @@ def bake(
 
     gi = GISettings(bounces, bounce_threshold, gi_rays, indirect_threshold_deg)
     device = resolve_device(device)
-    if threshold_deg is not None and (not hierarchy or not (threshold_deg >= 0) or not math.isfinite(threshold_deg)):
-        raise LodprtError(
-            f"threshold_deg {threshold_deg!r}: the light cut needs the hierarchy and a finite threshold >= 0 degrees"
-        )
+    check_hierarchy(hierarchy, threshold_deg, hierarchy_method)
     check_sh_order(sh_order)
     codec = bake_codec(compress, *layout(scene, sh_order), out)
     cluster = workers is not None or scheduler is not None
@@ -218,7 +217,7 @@ def bake(
         hierarchy_seconds, built = None, 0.0
         if hierarchy:
             stored = target is not None and target.complete("hierarchy")  # read back: its build time is not ours
-            tree, hierarchy_seconds = _hierarchy(scene, tree, target, hierarchy_progress)
+            tree, hierarchy_seconds = _hierarchy(scene, tree, target, hierarchy_progress, hierarchy_method)
             built = 0.0 if stored else hierarchy_seconds
         job = SampleJob(scene, tree if threshold_deg is not None else None, sh_order, device, threshold_deg,
                         None if target is None else str(target.partial.resolve()), gi)
@@ -287,6 +286,18 @@ def compress_finished(out, codec, samples: list[dict]) -> list[dict]:
     return compress_store(out, out, codec, overwrite=True, option="compress")["samples"]
 
 
+def check_hierarchy(hierarchy: bool, threshold_deg, method: str) -> None:
+    """Refuse a light cut without the hierarchy or with a bad threshold, and an unknown hierarchy build."""
+    if threshold_deg is not None and (not hierarchy or not (threshold_deg >= 0) or not math.isfinite(threshold_deg)):
+        raise LodprtError(
+            f"threshold_deg {threshold_deg!r}: the light cut needs the hierarchy and a finite threshold >= 0 degrees"
+        )
+    if hierarchy:
+        from lodprt.model.hierarchy_build import check_method
+
+        check_method(method)
+
+
 def check_sh_order(sh_order: int) -> None:
     """Refuse an SH order the float32 kernels do not cover."""
     from lodprt.kernels import sh as ksh
@@ -295,22 +306,24 @@ def check_sh_order(sh_order: int) -> None:
         raise LodprtError(f"sh_order {sh_order}: must be >= 1; the float32 kernels go up to order {ksh.MAX_KERNEL_ORDER}")
 
 
-def _hierarchy(scene: Scene, tree, target, progress) -> tuple[object, float]:
-    """The vertex hierarchy (the complete one of a resumed or extended store, ``tree``, or built now) and its build
-    seconds; stored under ``hierarchy/`` (completion mark last)."""
+def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[object, float]:
+    """The vertex hierarchy (the complete one of a resumed or extended store, ``tree``, or built now with
+    ``method``) and its build seconds; stored under ``hierarchy/`` (completion mark last), with the method that
+    built it."""
     from lodprt.model.hierarchy_build import build_hierarchy
 
     if target is not None and target.complete("hierarchy"):
         return target.hierarchy()
     t_h = time.perf_counter()
     if tree is None:
-        tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=progress)
+        tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=progress, method=method)
     seconds = time.perf_counter() - t_h
     if target is not None:
         writer = target.writer
         for name, arr in tree.to_arrays().items():
             writer.array(f"hierarchy/{name}", arr, chunk_rows=1 << 18)
-        writer.attrs("hierarchy", levels=tree.levels, seconds=seconds, roots=int(len(tree.roots)), depth=tree.depth)
+        writer.attrs("hierarchy", levels=tree.levels, seconds=seconds, roots=int(len(tree.roots)), depth=tree.depth,
+                     method=tree.method)
         target.mark("hierarchy")
     return tree, seconds
 

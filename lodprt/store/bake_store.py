@@ -221,7 +221,9 @@ class Store:
             raise StoreError(f"{self.path}: no hierarchy/ group (baked with --no-hierarchy)")
         g = self.root["hierarchy"]
         arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS}
-        return Hierarchy.from_arrays(arrays, levels=int(g.attrs.get("levels", 0)), build_seconds=float(g.attrs.get("seconds", 0.0)))
+        return Hierarchy.from_arrays(arrays, levels=int(g.attrs.get("levels", 0)),
+                                     build_seconds=float(g.attrs.get("seconds", 0.0)),
+                                     method=str(g.attrs.get("method", "rounds")))
 
     def info(self) -> dict:
         """The summary ``lodprt info --json`` prints."""
@@ -264,8 +266,10 @@ class Store:
             out["hierarchy_roots"] = int(g.attrs["roots"])
             out["hierarchy_depth"] = int(g.attrs["depth"])
             out["hierarchy_seconds"] = float(g.attrs["seconds"])
+            out["hierarchy_method"] = str(g.attrs.get("method", "rounds"))
         else:
             out["hierarchy_nodes"] = out["hierarchy_roots"] = out["hierarchy_depth"] = out["hierarchy_seconds"] = None
+            out["hierarchy_method"] = None
         out["bytes_total"] = int(sum(s["bytes"] for s in samples))
         out["bytes_on_disk"] = int(sum(f.stat().st_size for f in self.path.rglob("*") if f.is_file()))
         from lodprt.store.codecs import codec_summary  # version 2: codec, store-level bytes, version-1 payload
