@@ -6,7 +6,7 @@ Scenes: the shared Stanford bunny, spot and fandisk, each on a 200 x 200 floor (
 thesis material, SH order 4, light cut at 5 degrees (the bake's defaults), one vertex hierarchy per scene shared by
 its bakes; light grids 2 x 1 x 2, 3 x 1 x 3 (the default) and 5 x 1 x 5 (quick: 3 x 1 x 3). Test lights: 6 (quick:
 3) fixed random positions in the light box, each at least a quarter of the sample spacing from every sample. For
-each interpolation (``Runtime(interpolation=...)``: "direct", the default; "direct-blend"; "direct-rays";
+each interpolation (``Runtime(interpolation=...)``: "direct", the default; "direct-agree"; "direct-blend";
 "thesis") and grid:
 
 * ``rrmse``: per-vertex RMSE of the full-resolution radiance toward the eye (``Runtime.radiance``) against exact
@@ -40,7 +40,7 @@ from common import MODELS, environment, parser, plot_path, table, write
 from runtime import run_paths, summary
 from table1 import EYE_OFFSET, exact_phong
 
-METHODS = ("direct", "direct-blend", "direct-rays", "thesis")
+METHODS = ("direct", "direct-agree", "direct-blend", "thesis")
 MODEL_FILES = {"bunny": "stanford-bunny.obj", "spot": "spot.obj", "fandisk": "fandisk.obj"}
 
 

@@ -3,8 +3,8 @@ light's unshadowed Phong radiance in closed form (T-6, P-6) times its visibility
 of the light samples (``kernels.runtime.relight`` over the residual store, M-2).
 
     M-1   L(p, s; x) = D(p, s; x) V(p; x) + sum_j w_j R_j(p, s)
-    M-3   V(p; x) = the samples' state where every sample j with w_j > 0 agrees (all LIT or all SHADOWED),
-                    else one any-hit shadow ray toward x (mode 0; mode 2 casts the ray always)
+    M-3   V(p; x) = one any-hit shadow ray toward x (RAYS, "direct"); or (AGREE_OR_RAY, "direct-agree") the
+                    samples' state where every sample j with w_j > 0 agrees (all LIT or all SHADOWED), else a ray
     M-4   V(p; x) = sum_j w_j [V_j = LIT] / sum_j w_j over the samples that face the light (mode 1, no rays)
 """
 

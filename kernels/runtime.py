@@ -24,23 +24,43 @@ def detail_bound(
     used: wp.array(dtype=wp.int32),
     weights: wp.array2d(dtype=wp.float32),
     detail: wp.array3d(dtype=wp.float32),
+    sharp: int,  # In: 0 sum_j |W_jc| D_jc (T-12 blends the samples); 1 max_j D_jc sum_j |W_jc| (M-5)
 ):
     """S-2: max over RGB of sum_j |W_jc| D_jc (units of white, at most 1); D_jc bounds the radiance the subtree's
-    completion could miss toward any view direction (``lodprt.runtime.node_bounds.detail_bounds``)."""
+    completion could miss toward any view direction (``lodprt.runtime.node_bounds.detail_bounds``). M-5 (the
+    direct path's hard shadows between samples): max_j D_jc sum_j |W_jc|, each sample's detail at full weight."""
     channels = detail.shape[2]
     dr = float(0.0)
     dg = float(0.0)
     db = float(0.0)
+    mr = float(0.0)
+    mg = float(0.0)
+    mb = float(0.0)
     for u in range(used.shape[0]):
         j = used[u]
         for c in range(channels):
             det = detail[row, j, c]
             if channels == 1 or c == 0:
                 dr += det * wp.abs(weights[j, 0])
+                mr = wp.max(mr, det)
             if channels == 1 or c == 1:
                 dg += det * wp.abs(weights[j, 1])
+                mg = wp.max(mg, det)
             if channels == 1 or c == 2:
                 db += det * wp.abs(weights[j, 2])
+                mb = wp.max(mb, det)
+    if sharp == 1:
+        tr = float(0.0)
+        tg = float(0.0)
+        tb = float(0.0)
+        for u in range(used.shape[0]):
+            j = used[u]
+            tr += wp.abs(weights[j, 0])
+            tg += wp.abs(weights[j, 1])
+            tb += wp.abs(weights[j, 2])
+        dr = mr * tr
+        dg = mg * tg
+        db = mb * tb
     return wp.min(wp.max(wp.max(dr, dg), db), 1.0)
 
 
@@ -110,6 +130,7 @@ def view_errors(
     box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
     detail: wp.array3d(dtype=wp.float32),  # In: (N - V, S, C) S-2 bound of the completion residual / white
     criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
+    sharp: int,  # In: 1 for the direct interpolations (M-5: each sample's S-2 detail at full weight), 0 for T-12
     exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known
     bound: float,  # In: the error bound (the decision's threshold)
     hysteresis: float,  # In: >= 1; a candidate is collapsed only at or below bound / hysteresis
@@ -188,7 +209,7 @@ def view_errors(
             err[k] = wp.min(err[k], bound)
         return
     if criterion == 0:
-        det = detail_bound(row, used, weights, detail)
+        det = detail_bound(row, used, weights, detail, sharp)
         e_detail[k] = det
         err[k] = wp.max(geo_term, det * cover)  # S-1 with S-2
         if exact == 0:

@@ -114,7 +114,7 @@ def test_specular_between_samples_equals_the_float64_bake(tmp_path):
     eye = np.array([0.3, 0.8, 1.2])
     light = np.array([-0.13, 1.55, 0.07])
     want = exact(scene, store, light, eye)
-    for mode in ("direct", "direct-rays"):
+    for mode in ("direct", "direct-agree"):
         got = runtime_radiance(store, light, eye, mode)
         np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5 * want.max(), err_msg=mode)
 
@@ -137,7 +137,7 @@ def shadow_profile(scene, store, light, rad, caster, offset):
     return ratio, shadow, np.where(plane, dist, np.inf)
 
 
-@pytest.mark.parametrize("interpolation", ["direct", "direct-rays", "direct-blend", "thesis"])
+@pytest.mark.parametrize("interpolation", ["direct", "direct-agree", "direct-blend", "thesis"])
 def test_box_shadow_moves_with_the_light(box_shadow, interpolation):
     """The light crosses a sample cell in small steps: at every step one shadow (no vertex half dark farther than
     one vertex spacing from the exact edge: no ghost edge) whose edge lies within one spacing of where the
@@ -160,7 +160,7 @@ def test_box_shadow_moves_with_the_light(box_shadow, interpolation):
         ghost = (ratio > 0.1) & (ratio < 0.9) & ~near & np.isfinite(dist)
         wrong = ((ratio < 0.5) != shadow) & ~near & np.isfinite(dist)
         worst = max(worst, ghost.sum() + wrong.sum())
-        if interpolation in ("direct", "direct-rays"):
+        if interpolation in ("direct", "direct-agree"):
             assert not ghost.any(), f"light {light}: {ghost.sum()} half-dark vertices away from the edge"
             assert not wrong.any(), f"light {light}: {wrong.sum()} vertices on the wrong side of the edge"
     if interpolation in ("direct-blend", "thesis"):
@@ -206,7 +206,7 @@ def test_light_coefficients_match_the_runtime(box_shadow):
 
     _, store = box_shadow
     light = np.array([[0.11, 1.5, 0.09]])
-    for mode in ("direct", "direct-blend", "thesis"):
+    for mode in ("direct", "direct-agree", "direct-blend", "thesis"):
         rt = Runtime(store, device="cpu", lod=False, interpolation=mode)
         rt.set_lights(light)
         _, _, free = light_coefficients(store, light, interpolation=mode, device="cpu")

@@ -242,10 +242,11 @@ def test_culling_is_conservative(store):
 
 def test_lumi_error_bounds_the_leaf_spread(store):
     """e_lumi is at least the true display spread (max - min of clip(L / white, 0, 1)) of the leaves' radiance toward
-    the node's view direction, and it is 0 for a node whose leaves all read the same."""
+    the node's view direction, and it is 0 for a node whose leaves all read the same (T-14's boxes hold the
+    samples' radiance: the T-12 blend of the thesis interpolation)."""
     from lodprt.runtime.frames import display
 
-    r = Runtime(store)
+    r = Runtime(store, interpolation="thesis")
     r.set_camera(orbit_camera(r, 0.4))
     r.set_lights([store.light_positions[1] * 0.6 + store.light_positions[4] * 0.4])
     nodes = np.random.default_rng(1).choice(np.arange(r.h.num_vertices, r.h.num_nodes), 400, replace=False)

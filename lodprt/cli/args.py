@@ -112,11 +112,10 @@ def add_interpolation(p: argparse.ArgumentParser) -> None:
     from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION, INTERPOLATIONS
 
     p.add_argument("--interpolation", choices=INTERPOLATIONS, default=DEFAULT_INTERPOLATION,
-                   help="a light between samples: 'direct' (default) evaluates its direct Phong light exactly, its "
-                        "shadows from the samples where they agree and a shadow ray where they disagree, plus the "
-                        "samples' interpolated residual (indirect light); 'direct-blend' blends the samples' "
-                        "visibility instead of casting rays; 'direct-rays' casts a ray for every vertex; 'thesis' "
-                        "blends the samples' radiance (T-12)")
+                   help="a light between samples: 'direct' (default) evaluates its direct Phong light exactly with "
+                        "a shadow ray per vertex, plus the samples' interpolated residual (indirect light); "
+                        "'direct-agree' casts rays only where the samples disagree; 'direct-blend' blends the "
+                        "samples' visibility instead of casting rays; 'thesis' blends the samples' radiance (T-12)")
 
 
 def add_light(p, *, required: bool = False, help: str = "a point light's position (repeat for several lights)") -> None:

@@ -8,12 +8,14 @@ Phong radiance in closed form times its visibility, plus the interpolated residu
 kernel and ray offset, so that ``R_j`` holds what has no closed form: indirect light (GI stores), the light cut's
 completion error and a codec's error; on a direct-only store it is 0 on every vertex the light cut kept. On a
 sample (``w_j = 1``) M-1 gives back ``S_j`` exactly. Between samples ``D`` follows the actual light (distance,
-N.L, the lobe toward the eye), and ``V`` is the samples' state where they agree and one shadow ray where they
-disagree (M-3), so shadows move with the light instead of cross-fading.
+N.L, the lobe toward the eye), and ``V`` is one shadow ray toward the light (or, "direct-agree", the samples'
+state where they agree and a ray where they disagree, M-3), so shadows move with the light instead of
+cross-fading.
 
-INTERPOLATIONS names the run-time lighting paths: ``"direct"`` (default, M-1 with M-3), ``"direct-blend"`` (M-1
-with the samples' visibility blended by the weights, no rays: M-4), ``"direct-rays"`` (M-1 with a shadow ray for
-every vertex) and ``"thesis"`` (T-12: the samples' radiance blended).
+INTERPOLATIONS names the run-time lighting paths: ``"direct"`` (default: M-1 with a shadow ray toward the light
+for every vertex that faces it, so V is the bake's own visibility at the actual light), ``"direct-agree"`` (M-1
+with M-3: the samples' state where they agree, a ray only where they disagree), ``"direct-blend"`` (M-1 with the
+samples' visibility blended by the weights, no rays: M-4) and ``"thesis"`` (T-12: the samples' radiance blended).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 
-INTERPOLATIONS = ("direct", "direct-blend", "direct-rays", "thesis")
+INTERPOLATIONS = ("direct", "direct-agree", "direct-blend", "thesis")
 DEFAULT_INTERPOLATION = "direct"
 
 
@@ -48,7 +50,7 @@ class DirectLight:
             raise LodprtError("DirectLight: the thesis interpolation has no direct term")
         wp = warp()
         self.wp, self.device, self.store = wp, device, store
-        self.mode = {"direct": kdirect.AGREE_OR_RAY, "direct-blend": kdirect.BLEND, "direct-rays": kdirect.RAYS}[
+        self.mode = {"direct": kdirect.RAYS, "direct-agree": kdirect.AGREE_OR_RAY, "direct-blend": kdirect.BLEND}[
             interpolation]
         scene = store.scene()
         self.scene = scene

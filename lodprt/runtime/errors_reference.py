@@ -70,6 +70,7 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
     hi = np.zeros((len(nodes), 3))
     lo = np.zeros((len(nodes), 3))
     det = np.zeros((len(nodes), 3))
+    det_max, total = np.zeros((len(nodes), 3)), np.zeros(3)
     internal = nodes - rt.h.num_vertices
     detail = rt.detail
     for j, slot in zip(rt.used_samples, rt.used_slots):  # each sample in use and the cache slot holding it
@@ -79,6 +80,10 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
         hi += (mid + rad) * w
         lo += (mid - rad) * w
         det += detail[internal, slot].astype(np.float64) * np.abs(w)  # S-2: (K, C) bounds toward any direction
+        det_max = np.maximum(det_max, detail[internal, slot].astype(np.float64) * np.ones_like(w))
+        total = total + np.abs(w[0])
+    if rt.interpolation != "thesis":  # M-5: each sample's detail at full weight (hard shadows between samples)
+        det = det_max * total[None, :]
     e_lumi = np.clip((display(hi) - display(lo)).max(1), 0.0, 1.0)
     depth = np.c_[p, np.ones(len(p))] @ rt.vp[3]  # clip w of the node centre
     foot = np.where(depth > r, np.minimum(r * rt.focal_px() / np.where(depth > r, depth, 1.0), 1e9), 1e9)

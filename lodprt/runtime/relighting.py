@@ -59,7 +59,7 @@ class Relighting:
 
     def light_slots(self) -> np.ndarray:
         """(L, k) int32 the cache slot of each light's samples, -1 where the sample has no weight: the samples whose
-        visibility decides the light's (M-3, M-4)."""
+        visibility decides the light's ("direct-agree" M-3, "direct-blend" M-4)."""
         slot = np.full(len(self.interp.samples), -1, np.int32)
         slot[self.used_samples] = self.used_slots
         return np.where(self.light_weights > 0, slot[self.light_samples], -1).astype(np.int32)

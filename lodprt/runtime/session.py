@@ -97,9 +97,9 @@ class Runtime:
     (``lodprt.runtime.samples.SampleCache``);
     progress(done, total): called as the light samples a frame needs are completed;
     interpolation: how a light between samples is lit (``lodprt.runtime.direct_light.INTERPOLATIONS``): "direct"
-    (default: the light's direct Phong radiance in closed form, its visibility from the samples where they agree
-    and a shadow ray where they disagree, plus the samples' interpolated residual, M-1..M-3), "direct-blend",
-    "direct-rays", or "thesis" (T-12: the samples' radiance blended).
+    (default: the light's direct Phong radiance in closed form times a shadow ray's visibility, plus the samples'
+    interpolated residual, M-1, M-2), "direct-agree" (rays only where the samples disagree, M-3), "direct-blend"
+    (no rays, M-4), or "thesis" (T-12: the samples' radiance blended).
     """
 
     def __init__(self, store, *, error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
@@ -373,7 +373,7 @@ class Runtime:
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
-                *bounds, CRITERIA.index(self.criterion), int(bool(exact)),
+                *bounds, CRITERIA.index(self.criterion), int(self.interpolation != "thesis"), int(bool(exact)),
                 float(self.error_bound), float(HYSTERESIS), self.geo_rate(), self.area_ref(), self.alpha,
                 wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
