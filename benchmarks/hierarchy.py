@@ -3,7 +3,7 @@
     python benchmarks/hierarchy.py [--quick] [--json PATH]
 
 Peak memory is the process's peak resident set after each build (cumulative, so an upper bound for later rows).
-Meshes: the shared Stanford bunny on a 380 x 380 floor (180,347 vertices), spot and fandisk (quick: the bunny on a
+Meshes: the Stanford bunny on a 380 x 380 floor (180,347 vertices), spot and fandisk (quick: the bunny on a
 60 x 60 floor). Baseline: pymeshlab decimating the same mesh straight to the hierarchy's base size, one call.
 """
 
@@ -14,20 +14,20 @@ import time
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, thesis_scene, write
+from common import environment, model, parser, plot_path, table, thesis_scene, write
 
 
 def meshes(quick: bool):
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     if quick:
-        pos, faces = load_mesh(MODELS / "stanford-bunny.obj")
+        pos, faces = load_mesh(model("stanford-bunny"))
         yield "bunny + 60x60 floor", assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (60, 1.0, THESIS_MATERIAL),
                                                     {}, "l", "q")
         return
     yield "bunny + 380x380 floor", thesis_scene(quick=False)
     for name in ("spot", "fandisk"):
-        pos, faces = load_mesh(MODELS / f"{name}.obj")
+        pos, faces = load_mesh(model(name))
         yield name, assemble_scene([(name, pos, faces, THESIS_MATERIAL)], None, {}, "l", name)
 
 

@@ -16,8 +16,7 @@ from lodprt.errors import StoreError
 from lodprt.store.bake_store import FORMAT_VERSION, open_store
 from lodprt.store.writer import FORMAT_NAME, OWNER_FILE, StoreWriter, clean_leftovers, process_identity, writer_alive
 
-REPO = Path(__file__).resolve().parents[1]
-SPOT = REPO.parent / "shared" / "models" / "spot.obj"
+from conftest import BUNNY, SPOT
 
 
 def sleeper():
@@ -136,12 +135,10 @@ def lodprt(*args):
 
 def test_sigkill_mid_bake_leaves_destination_untouched(tmp_path):
     """SIGKILL mid-bake keeps the old store byte-identical; the next bake succeeds and removes the dead partial."""
-    if not SPOT.is_file() or not (REPO.parent / "shared" / "models" / "stanford-bunny.obj").is_file():
-        pytest.skip("../shared/models/ is not present")
     small = tmp_path / "small.toml"
     small.write_text(f'[[object]]\nmesh = "{SPOT.as_posix()}"\n[floor]\nresolution = 10\n[lights]\ngrid = [1, 1, 1]\n')
     big = tmp_path / "big.toml"  # the hierarchy of the bunny on a floor takes seconds: time to kill it
-    bunny = (REPO.parent / "shared" / "models" / "stanford-bunny.obj").as_posix()
+    bunny = BUNNY.as_posix()
     big.write_text(f'[[object]]\nmesh = "{bunny}"\n[floor]\nresolution = 60\n[lights]\ngrid = [2, 1, 2]\n')
     out = tmp_path / "out.zarr"
     fast = ["--device", "cpu", "--sh-order", "2", "--full", "--no-hierarchy"]
