@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 
+import skip_policy
 from lodprt.devices import available_devices
 
 REPO = Path(__file__).resolve().parents[1]
@@ -83,6 +84,7 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
+    skip_policy.register(config)  # under CI, a skip for anything but a missing GPU, GL context or X server fails
     config.addinivalue_line("markers", "warp_debug: the focused subset that runs every kernel on every store kind; "
                             "`python -m pytest --warp-debug -m warp_debug` runs it bounds-checked")
     if config.getoption("--warp-debug"):
