@@ -109,3 +109,20 @@ def test_damaged_chunk_is_one_line_naming_store_array_and_info(tmp_path, spot_sc
     assert f"lodprt info {out}" in err
     assert main(["info", str(out)]) == 0  # what the message suggests works on the damaged store
     assert open_store(out).sample(0)[0].size > 0  # the other samples still read
+
+
+def test_disk_full_outside_a_store_is_one_line_naming_the_output(tmp_path, spot_scene, monkeypatch, capsys):
+    """ENOSPC anywhere else (here numpy writing lodprt radiance's .npy) is one line naming the output, status 2."""
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    capsys.readouterr()
+    rad = tmp_path / "r.npy"
+
+    def refuse(*_a, **_k):
+        raise OSError(errno.ENOSPC, "No space left on device", str(rad))
+
+    monkeypatch.setattr(np, "save", refuse)
+    rc = main(["radiance", str(out), "--sample", "0", "--eye", "0", "1", "2", "-o", str(rad)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert f"{rad}: no space left on the device" in err
