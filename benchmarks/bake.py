@@ -2,7 +2,7 @@
 
     python benchmarks/bake.py [--quick] [--json PATH] [--device cpu|cuda] [--sh-order N]
 
-Scene: the shared Stanford bunny on a 380 x 380 floor (179,234 referenced vertices), 3 x 1 x 3 light samples,
+Scene: the Stanford bunny on a 380 x 380 floor (179,234 referenced vertices), 3 x 1 x 3 light samples,
 SH order 4 (quick: 100 x 100 floor, 2 samples). Reports time per sample and per vertex, bytes per sample, the
 speed ratio, and how far the two bakes' coefficients differ (float32 kernels vs float64 numpy, and the few rays the
 two casters decide differently).

@@ -5,13 +5,20 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import sys
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-MODELS = REPO.parent / "shared" / "models"
+#: The test meshes shipped with the project (stanford-bunny, spot, fandisk): xz-compressed OBJ files, read by
+#: lodprt's mesh loader to exactly the arrays of the plain OBJ files (tests/data/README.md).
+MODELS = REPO / "tests" / "data"
+
+
+def model(name: str) -> Path:
+    """The shipped test mesh ``name`` (``"stanford-bunny"``, ``"spot"`` or ``"fandisk"``)."""
+    return MODELS / f"{name}.obj.xz"
+
 RESULTS = REPO / "benchmarks" / "results"
 
 
@@ -25,13 +32,10 @@ def parser(description: str) -> argparse.ArgumentParser:
 
 
 def thesis_scene(*, quick: bool, sh_order: int | None = None):
-    """The shared Stanford bunny on a 380 x 380 floor with 3 x 1 x 3 light samples (quick: 100 x 100, 2 x 1 x 1)."""
+    """The Stanford bunny on a 380 x 380 floor with 3 x 1 x 3 light samples (quick: 100 x 100, 2 x 1 x 1)."""
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
-    path = MODELS / "stanford-bunny.obj"
-    if not path.is_file():
-        sys.exit(f"benchmark needs {path} (the shared test meshes)")
-    pos, faces = load_mesh(path)
+    pos, faces = load_mesh(model("stanford-bunny"))
     res = 100 if quick else 380
     grid = [2, 1, 1] if quick else [3, 1, 3]
     return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (res, 1.0, THESIS_MATERIAL), {"grid": grid},

@@ -2,7 +2,7 @@
 
     python benchmarks/compression.py [--quick] [--json PATH] [--device cpu|cuda] [--threshold-deg E]
 
-Scene: the shared Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 5 degrees
+Scene: the Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 5 degrees
 (quick: 100 x 100 floor, 2 x 1 x 1 samples, fewer codecs). The cut store (format version 1, float32) is re-encoded
 with every codec (``lodprt.store.compress``, format version 2). Per codec: bytes per sample, payload (the arrays'
 bytes, store-level codec arrays shared out over the samples) and on disk (zarr's default zstd included); the

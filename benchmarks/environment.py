@@ -2,7 +2,7 @@
 
     python benchmarks/environment.py [--quick] [--json PATH] [--device cpu|cuda] [--sh-order N]
 
-Scene: the shared Stanford bunny on a 60 x 60 floor (quick: the bunny alone), thesis material (kd 0.88), lit by
+Scene: the Stanford bunny on a 60 x 60 floor (quick: the bunny alone), thesis material (kd 0.88), lit by
 the procedural sky. Three tables:
 
 1. transfer bake time per vertex against rays per vertex and bounces (shadowed, interreflected with 1 and 2
@@ -21,14 +21,13 @@ import time
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, write
+from common import environment, model, parser, plot_path, table, write
 
 
 def scene_for(quick: bool):
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
-    path = MODELS / "stanford-bunny.obj"
-    pos, faces = load_mesh(path)
+    pos, faces = load_mesh(model("stanford-bunny"))
     floor = None if quick else (60, 1.0, THESIS_MATERIAL)
     return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], floor, {}, "lights",
                           "stanford-bunny" + ("" if quick else " + 60x60 floor"))

@@ -2,7 +2,7 @@
 
     python benchmarks/gi.py [--quick] [--mitsuba] [--json PATH] [--device cpu|cuda]
 
-Scene: the shared Stanford bunny on a floor, both diffuse white (kd 0.8, ks 0). For each bounce count 0..3 and
+Scene: the Stanford bunny on a floor, both diffuse white (kd 0.8, ks 0). For each bounce count 0..3 and
 gathering ray count, in the same run: the full-resolution GI bake and the LOD GI bake (light cut --threshold-deg
 plus the indirect cut --indirect-threshold-deg), their bake times (ratio), and the rel-RMSE of their completed
 per-vertex radiance against a converged reference (full resolution, many rays, the same bounce count) and against
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, write
+from common import environment, model, parser, plot_path, table, write
 from mitsuba_ref import mitsuba_image, psnr, require_mitsuba
 
 KD = 0.8
@@ -33,10 +33,7 @@ EYE, TARGET, FOV = (-0.05, 0.16, 0.32), (-0.02, 0.07, 0.0), 40.0
 def gi_scene(floor_res: int, grid, box=None):
     from lodprt.model.scene import Material, assemble_scene, load_mesh
 
-    path = MODELS / "stanford-bunny.obj"
-    if not path.is_file():
-        sys.exit(f"benchmark needs {path} (the shared test meshes)")
-    pos, faces = load_mesh(path)
+    pos, faces = load_mesh(model("stanford-bunny"))
     white = Material((KD, KD, KD), 0.0, 1.0)
     lights = {"grid": list(grid)} if box is None else {"grid": list(grid), "box": list(box)}
     return assemble_scene([("bunny", pos, faces, white)], (floor_res, 1.0, white), lights, "lights",

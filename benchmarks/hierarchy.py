@@ -3,8 +3,8 @@ pymeshlab-seeded build (``build_hierarchy(method="pymeshlab")``), and pymeshlab'
 
     python benchmarks/hierarchy.py [--quick] [--json PATH] [--device cpu|cuda]
 
-Meshes: the shared Stanford bunny on a 380 x 380 floor (180,347 vertices, the main case), spot and fandisk (quick:
-the bunny on a 60 x 60 floor). Every build runs in a fresh child process (``python benchmarks/hierarchy.py --child
+Meshes: the Stanford bunny (tests/data) on a 380 x 380 floor (180,347 vertices, the main case), spot and fandisk
+(quick: the bunny on a 60 x 60 floor). Every build runs in a fresh child process (``python benchmarks/hierarchy.py --child
 METHOD MESH``), which reports:
 
 * ``build s``: ``build_hierarchy``'s own time; ``B/vertex``: the child's peak resident memory (``VmHWM``) above its
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, write
+from common import environment, model, parser, plot_path, table, write
 
 FULL = ("bunny380", "spot", "fandisk")
 QUICK = ("bunny60",)
@@ -46,11 +46,11 @@ def scene_of(name: str):
 
     if name.startswith("bunny"):
         floor = int(name[5:])
-        pos, faces = load_mesh(MODELS / "stanford-bunny.obj")
+        pos, faces = load_mesh(model("stanford-bunny"))
         grid = [3, 1, 3] if floor >= 380 else [2, 1, 1]
         return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (floor, 1.0, THESIS_MATERIAL),
                               {"grid": grid}, "lights", f"bunny + {floor}x{floor} floor")
-    pos, faces = load_mesh(MODELS / f"{name}.obj")
+    pos, faces = load_mesh(model(name))
     return assemble_scene([(name, pos, faces, THESIS_MATERIAL)], (60, 1.0, THESIS_MATERIAL), {"grid": [3, 1, 3]},
                           "lights", f"{name} + 60x60 floor")
 

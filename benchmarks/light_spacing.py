@@ -2,7 +2,7 @@
 
     python benchmarks/light_spacing.py [--quick] [--json PATH] [--device cpu|cuda]
 
-Scene: the shared Stanford bunny on a 380 x 380 floor (quick: 100 x 100), SH order 4, light cut at 5 degrees,
+Scene: the Stanford bunny on a 380 x 380 floor (quick: 100 x 100), SH order 4, light cut at 5 degrees,
 one vertex hierarchy shared by every bake. The light box is the scene's default slab above the bunny; it is
 sampled by grids of n x 1 x n lights (n = 2, 3, 5, 8; quick: 2, 3). Test lights: 8 fixed random positions in
 the box (the same for every grid), so they fall between samples. For each, the run time's interpolated and

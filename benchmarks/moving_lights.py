@@ -2,7 +2,7 @@
 
     python benchmarks/moving_lights.py [--quick] [--mitsuba] [--json PATH] [--device cpu|cuda]
 
-Scenes: the shared Stanford bunny, spot and fandisk, each on a 200 x 200 floor (quick: the bunny on 60 x 60), the
+Scenes: the Stanford bunny, spot and fandisk (tests/data), each on a 200 x 200 floor (quick: the bunny on 60 x 60), the
 thesis material, SH order 4, light cut at 5 degrees (the bake's defaults), one vertex hierarchy per scene shared by
 its bakes; light grids 2 x 1 x 2, 3 x 1 x 3 (the default) and 5 x 1 x 5 (quick: 3 x 1 x 3). Test lights: 6 (quick:
 3) fixed random positions in the light box, each at least a quarter of the sample spacing from every sample. For
@@ -36,12 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, write
+from common import environment, model, parser, plot_path, table, write
 from runtime import run_paths, summary
 from table1 import EYE_OFFSET, exact_phong
 
 METHODS = ("direct", "direct-agree", "direct-blend", "thesis")
-MODEL_FILES = {"bunny": "stanford-bunny.obj", "spot": "spot.obj", "fandisk": "fandisk.obj"}
+MODEL_FILES = {"bunny": "stanford-bunny", "spot": "spot", "fandisk": "fandisk"}
 
 
 def model_scene(name: str, floor: int, grid, *, ks: float | None = None):
@@ -49,7 +49,7 @@ def model_scene(name: str, floor: int, grid, *, ks: float | None = None):
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     mat = THESIS_MATERIAL if ks is None else dataclasses.replace(THESIS_MATERIAL, ks=ks)
-    pos, faces = load_mesh(MODELS / MODEL_FILES[name])
+    pos, faces = load_mesh(model(MODEL_FILES[name]))
     return assemble_scene([(name, pos, faces, mat)], (floor, 1.0, mat), {"grid": list(grid)}, "lights",
                           f"{name} + {floor}x{floor} floor")
 

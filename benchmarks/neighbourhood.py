@@ -3,7 +3,7 @@ the per-frame cost.
 
     python benchmarks/neighbourhood.py [--quick] [--json PATH] [--device cpu|cuda] [--rays R]
 
-Object O: the shared Stanford bunny (quick: an icosphere) above a 61 x 61 ground plane (quick 31 x 31), kd 0.8,
+Object O: the Stanford bunny (quick: an icosphere) above a 61 x 61 ground plane (quick 31 x 31), kd 0.8,
 lit by the procedural sky at order 3. The reference is the plane's own shadowed transfer bake of the O + plane
 scene (``lodprt bake-environment --transfer shadowed``, same rays) against the plane alone: its darkening. For
 each grid resolution G^3 (margin 1 extent, occlusion only, as that reference has no reflection): the bake time
@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, write
+from common import environment, model, parser, plot_path, table, write
 
 
 def scene_for(quick: bool):
@@ -33,7 +33,7 @@ def scene_for(quick: bool):
         m = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
         op, of, name = np.asarray(m.vertices) + [0, 0.45, 0], np.asarray(m.faces), "icosphere"
     else:
-        op, of = load_mesh(MODELS / "stanford-bunny.obj")
+        op, of = load_mesh(model("stanford-bunny"))
         name = "stanford-bunny"
     lo, hi = op.min(0), op.max(0)
     ext = float((hi - lo).max())

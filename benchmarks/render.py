@@ -2,7 +2,7 @@
 
     python benchmarks/render.py [--quick] [--json PATH] [--store OUT.zarr] [--device cpu|cuda]
 
-Scene: the shared Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 5
+Scene: the Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 5
 degrees, baked here into a temporary store (quick: 100 x 100 floor, 2 x 1 x 1 samples) unless --store names one.
 Each frame the camera orbits 1 degree about the bunny and a light moves, so the run time moves its cut and
 relights every frame; "update" is ``set_camera`` + ``set_lights`` + ``Runtime.update()`` (cut, triangulation,

@@ -2,7 +2,7 @@
 
     python benchmarks/runtime.py [--quick] [--json PATH] [--store OUT.zarr] [--device cpu|cuda]
 
-Scene: the shared Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 30
+Scene: the Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples, SH order 4, light cut at 30
 degrees (the thesis' setting for its run-time figures 21-24), baked here into a temporary store unless --store
 names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
 

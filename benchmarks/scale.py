@@ -2,7 +2,7 @@
 
     python benchmarks/scale.py [--quick] [--floors 200 380 ...] [--budget SECONDS] [--json PATH]
 
-Scenes: the shared Stanford bunny on an N x N floor (N = 200 -> 1400: 75,947 -> 1,995,947 vertices). Every
+Scenes: the Stanford bunny on an N x N floor (N = 200 -> 1400: 75,947 -> 1,995,947 vertices). Every
 measurement runs in a fresh child process; its peak resident memory is the kernel's high-water mark of that process
 (``VmHWM``), its time the child's own clock around the measured call (the bake: the command's wall time):
 
@@ -35,9 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, write
+from common import environment, model, parser, plot_path, table, write
 
-BUNNY = MODELS / "stanford-bunny.obj"
+BUNNY = model("stanford-bunny")
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -265,8 +265,6 @@ def main():
     if args.child:
         print(json.dumps(child(args.child[0], int(args.child[1]))))
         return
-    if not BUNNY.is_file():
-        sys.exit(f"benchmark needs {BUNNY} (the shared test meshes)")
     device = args.device or "cpu"
     floors = args.floors or ([40, 100] if args.quick else [200, 380, 700, 1000, 1400])
     sfloor = args.sample_floor or (40 if args.quick else 200)

@@ -2,7 +2,7 @@
 
     python benchmarks/table1.py [--quick] [--json PATH] [--device cpu|cuda]
 
-Scene: the shared Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 uniform light samples, SH order 4, thresholds
+Scene: the Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 uniform light samples, SH order 4, thresholds
 5, 10, 20, 30, 50, 100 degrees and the full-resolution bake (quick: 100 x 100 floor, 2 samples, 3 thresholds).
 Errors, for a fixed eye and averaged over the samples:
   * completed cut radiance against the full-resolution bake's radiance (relative RMSE and max, over all vertices

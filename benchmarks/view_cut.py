@@ -1,9 +1,9 @@
 """View cut: image error against frame time for the two criteria ("screen", S-1/S-2, and the thesis' T-14), bound
-sweeps, on each shared model standing on a floor.
+sweeps, on each test model standing on a floor.
 
     python benchmarks/view_cut.py [--quick] [--json PATH] [--device cpu|cuda] [--floor N] [--frames N]
 
-Scenes: the shared bunny, spot and fandisk, each on an N x N floor (default 200; quick: 60, bunny only), 3 x 1 x 3
+Scenes: the bunny, spot and fandisk, each on an N x N floor (default 200; quick: 60, bunny only), 3 x 1 x 3
 light samples in the default box, SH order 4, light cut at 5 degrees (the bake's defaults). Per criterion and bound:
 an orbit of the camera (``lodprt.runtime.camera_path``, 400 x 300, light circling above) with the median frame time
 of ``Runtime.update()`` (cut + triangulation + relighting, after the first frame) and triangles; every 8th frame
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import MODELS, environment, parser, plot_path, table, write
+from common import environment, model, parser, plot_path, table, write
 
 SWEEPS = {"screen": (0.2, 0.35, 0.5, 0.7, 1.0, 1.4), "thesis": (0.1, 0.2, 0.25, 0.315, 0.4)}
 MODELS_USED = ("stanford-bunny", "spot", "fandisk")
@@ -33,7 +33,7 @@ def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
     from lodprt.model.scene import load_scene
 
     toml = folder / f"{name}.toml"
-    toml.write_text(f'[[object]]\nmesh = "{(MODELS / f"{name}.obj").as_posix()}"\n[floor]\nresolution = {floor}\n'
+    toml.write_text(f'[[object]]\nmesh = "{model(name).as_posix()}"\n[floor]\nresolution = {floor}\n'
                     "[lights]\ngrid = [3, 1, 3]\n")
     path = folder / f"{name}.zarr"
     bake(load_scene(toml), path, sh_order=4, device=device, threshold_deg=5.0)

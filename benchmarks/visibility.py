@@ -2,7 +2,7 @@
 
     python benchmarks/visibility.py [--quick] [--json PATH] [--device cpu|cuda]
 
-Scene: the shared Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples (quick: 100 x 100, 2 samples).
+Scene: the Stanford bunny on a 380 x 380 floor, 3 x 1 x 3 light samples (quick: 100 x 100, 2 samples).
 Rays: one per vertex facing each light (vertices facing away cast none, in both casters).
 Reports rays/s of Warp (one launch per sample; on the CPU one thread, and the bake's two-threads-two-samples mode)
 and of Embree, their ratio, and how often the two disagree.

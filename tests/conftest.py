@@ -1,14 +1,20 @@
-"""Shared fixtures: every available Warp device, the shared test meshes, an OpenGL context check."""
+"""Shared fixtures: every available Warp device, the test meshes shipped in tests/data, an OpenGL context check."""
 
 import functools
 from pathlib import Path
 
 import pytest
 
+import skip_policy
 from lodprt.devices import available_devices
 
 REPO = Path(__file__).resolve().parents[1]
-MODELS = REPO.parent / "shared" / "models"
+#: The test meshes (stanford-bunny, spot, fandisk) as xz-compressed OBJ files, read by lodprt's own mesh loader
+#: (tests/data/README.md: where each comes from, its licence).
+DATA = Path(__file__).resolve().parent / "data"
+BUNNY = DATA / "stanford-bunny.obj.xz"
+SPOT = DATA / "spot.obj.xz"
+FANDISK = DATA / "fandisk.obj.xz"
 
 
 @pytest.fixture(params=available_devices())
@@ -19,16 +25,13 @@ def device(request):
 
 @pytest.fixture(scope="session")
 def bunny_path():
-    """The shared Stanford bunny (34,834 referenced vertices); tests that need it skip when shared/ is absent."""
-    p = MODELS / "stanford-bunny.obj"
-    if not p.is_file():
-        pytest.skip("../shared/models/stanford-bunny.obj is not present")
-    return p
+    """The Stanford bunny shipped in tests/data (35,947 vertices, 34,834 referenced)."""
+    return BUNNY
 
 
 @pytest.fixture(scope="session")
 def bunny_floor(bunny_path):
-    """The shared bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices)."""
+    """The bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices)."""
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     pos, faces = load_mesh(bunny_path)
@@ -81,6 +84,7 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
+    skip_policy.register(config)  # under CI, a skip for anything but a missing GPU, GL context or X server fails
     config.addinivalue_line("markers", "warp_debug: the focused subset that runs every kernel on every store kind; "
                             "`python -m pytest --warp-debug -m warp_debug` runs it bounds-checked")
     if config.getoption("--warp-debug"):

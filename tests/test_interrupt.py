@@ -14,10 +14,10 @@ import pytest
 
 from lodprt.errors import StoreError
 from lodprt.store.bake_store import FORMAT_VERSION, open_store
+from lodprt.store.sample_groups import complete_samples, is_complete
 from lodprt.store.writer import FORMAT_NAME, OWNER_FILE, StoreWriter, clean_leftovers, process_identity, writer_alive
 
-REPO = Path(__file__).resolve().parents[1]
-SPOT = REPO.parent / "shared" / "models" / "spot.obj"
+from conftest import BUNNY, SPOT
 
 
 def sleeper():
@@ -136,12 +136,10 @@ def lodprt(*args):
 
 def test_sigkill_mid_bake_leaves_destination_untouched(tmp_path):
     """SIGKILL mid-bake keeps the old store byte-identical; the next bake succeeds and removes the dead partial."""
-    if not SPOT.is_file() or not (REPO.parent / "shared" / "models" / "stanford-bunny.obj").is_file():
-        pytest.skip("../shared/models/ is not present")
     small = tmp_path / "small.toml"
     small.write_text(f'[[object]]\nmesh = "{SPOT.as_posix()}"\n[floor]\nresolution = 10\n[lights]\ngrid = [1, 1, 1]\n')
     big = tmp_path / "big.toml"  # the hierarchy of the bunny on a floor takes seconds: time to kill it
-    bunny = (REPO.parent / "shared" / "models" / "stanford-bunny.obj").as_posix()
+    bunny = BUNNY.as_posix()
     big.write_text(f'[[object]]\nmesh = "{bunny}"\n[floor]\nresolution = 60\n[lights]\ngrid = [2, 1, 2]\n')
     out = tmp_path / "out.zarr"
     fast = ["--device", "cpu", "--sh-order", "2", "--full", "--no-hierarchy"]
@@ -171,3 +169,39 @@ def test_sigkill_mid_bake_leaves_destination_untouched(tmp_path):
     assert f"{partial}: removed" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.toml", "out.zarr", "small.toml"]
     assert open_store(out).num_samples == 1
+
+
+def test_sigint_mid_bake_exits_130_keeps_partial_and_resume_finishes(tmp_path):
+    """Ctrl-C while the light samples bake: exit status 130, one line (no traceback) naming the partial folder and
+    --resume; the folder holds the finished samples, and bake --resume reuses them and completes the store."""
+    scene = tmp_path / "big.toml"  # 36 samples of the bunny on a floor at ~0.05 s each: seconds to interrupt in
+    scene.write_text(f'[[object]]\nmesh = "{BUNNY.as_posix()}"\n[floor]\nresolution = 60\n[lights]\ngrid = [6, 1, 6]\n')
+    out = tmp_path / "out.zarr"
+    args = ["bake", scene, "-o", out, "--device", "cpu", "--sh-order", "3", "--full", "--no-hierarchy", "--jobs", "1"]
+    proc = subprocess.Popen(lodprt(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    partial = out.with_name(f"out.zarr.partial-{proc.pid}")
+    try:
+        deadline = time.monotonic() + 120
+        while not is_complete(partial / "samples" / "00000") and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert proc.poll() is None, "the bake finished (or failed) before it could be interrupted"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    said = [line for line in err.splitlines() if "interrupted" in line]
+    assert len(said) == 1 and partial.name in said[0] and "--resume" in said[0], err
+    assert partial.is_dir() and not out.exists()
+    done = len(complete_samples(partial, 36))
+    assert 1 <= done < 36 and f"{done} finished light sample(s)" in said[0]
+    r = subprocess.run(lodprt(*args, "--resume"), capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert f"{done} of 36 light samples were already in the store" in r.stderr
+    store = open_store(out)
+    assert store.num_samples == 36 and complete_samples(out, 36) == list(range(36))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big.toml", "out.zarr"]  # the partial became the store
+    ids, coeffs = store.sample(35)  # --full: every referenced vertex
+    assert len(ids) == int(store.referenced.sum()) and np.isfinite(coeffs).all()

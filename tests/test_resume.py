@@ -21,8 +21,9 @@ from lodprt.store.writer import OWNER_FILE, process_identity
 from lodprt.store.resume import TIMINGS
 from lodprt.store.sample_groups import SampleGroupWriter, complete_samples, is_complete, tidy
 
+from conftest import SPOT
+
 REPO = Path(__file__).resolve().parents[1]
-SPOT = REPO.parent / "shared" / "models" / "spot.obj"
 #: the attributes allowed to differ, written out here (not taken from the code under test), by group
 TIMING = {"": {"bake_seconds", "load_seconds", "hierarchy_seconds"}, "hierarchy": {"seconds"}, "samples": {"seconds"}}
 FAST = ["--device", "cpu", "--sh-order", "2", "--threshold-deg", "5"]
@@ -30,8 +31,6 @@ FAST = ["--device", "cpu", "--sh-order", "2", "--threshold-deg", "5"]
 
 def scene_file(tmp_path, grid=(4, 1, 4), box=None, name="scene.toml", floor=12):
     """spot on a small floor (about 3,100 vertices): every sample bakes in tens of milliseconds."""
-    if not SPOT.is_file():
-        pytest.skip("../shared/models/spot.obj is not present")
     lights = f"grid = {list(grid)}" + ("" if box is None else f"\nbox = {list(box)}")
     path = tmp_path / name
     path.write_text(f'[[object]]\nmesh = "{SPOT.as_posix()}"\n[floor]\nresolution = {floor}\n[lights]\n{lights}\n')

@@ -1,5 +1,7 @@
 """Scene loading: vertex order, floor, lights, normals, and clear errors for bad input."""
 
+import gzip
+import lzma
 import textwrap
 
 import numpy as np
@@ -32,7 +34,7 @@ def scene_toml(tmp_path, mesh="m.obj", extra=""):
 def test_bunny_keeps_file_vertex_order(bunny_path):
     """Store vertex i is the file's i-th 'v' line, unreferenced vertices included (no merging, no reordering)."""
     pos, faces = load_mesh(bunny_path)
-    lines = [ln.split() for ln in open(bunny_path) if ln.startswith("v ")]
+    lines = [ln.split() for ln in lzma.open(bunny_path, "rt") if ln.startswith("v ")]
     ref = np.array([[float(t) for t in ln[1:4]] for ln in lines])
     assert pos.shape == ref.shape == (35947, 3)
     np.testing.assert_array_equal(pos, ref)
@@ -188,6 +190,30 @@ def test_missing_and_unreadable_files(tmp_path):
     bad = write(tmp_path, "bad.toml", "[[object]\nmesh=")
     with pytest.raises(SceneError, match="bad.toml"):
         load_scene(bad)
+
+
+def test_compressed_meshes_read_as_their_inner_format(tmp_path):
+    """m.obj.gz / .xz / .bz2 give exactly the plain file's arrays and the plain name; a compressed tristrip PLY goes
+    through pymeshlab; a garbled archive and a name without its inner format are errors naming the file."""
+    import bz2
+
+    plain = load_mesh(write(tmp_path, "m.obj", QUAD_OBJ))
+    for suffix, codec in ((".gz", gzip), (".xz", lzma), (".bz2", bz2)):
+        path = tmp_path / f"m.obj{suffix}"
+        path.write_bytes(codec.compress(QUAD_OBJ.encode()))
+        got = load_mesh(path)
+        np.testing.assert_array_equal(got[0], plain[0])
+        np.testing.assert_array_equal(got[1], plain[1])
+        assert load_scene(path).object_names == ["m"]
+    ref, _ = strip_grid_ply(tmp_path / "strips.ply")
+    (tmp_path / "strips.ply.xz").write_bytes(lzma.compress((tmp_path / "strips.ply").read_bytes()))
+    np.testing.assert_array_equal(load_mesh(tmp_path / "strips.ply.xz")[0], ref)
+    (tmp_path / "bad.obj.gz").write_bytes(b"not gzip at all")
+    with pytest.raises(SceneError, match=r"bad\.obj\.gz: cannot decompress the mesh file \(\.gz\)"):
+        load_mesh(tmp_path / "bad.obj.gz")
+    (tmp_path / "m.xz").write_bytes(lzma.compress(QUAD_OBJ.encode()))
+    with pytest.raises(SceneError, match=r"m\.xz: mesh file: a compressed mesh names its format"):
+        load_mesh(tmp_path / "m.xz")
 
 
 def test_empty_and_nan_meshes(tmp_path):

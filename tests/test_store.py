@@ -3,7 +3,6 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -121,7 +120,7 @@ def lodprt(*args, cwd=None):
 
 
 def test_cli_bake_info_radiance(tmp_path, bunny_path):
-    """lodprt bake / info --json / radiance work end to end on a TOML scene with the shared bunny."""
+    """lodprt bake / info --json / radiance work end to end on a TOML scene with the bunny (tests/data)."""
     scene = tmp_path / "scene.toml"
     scene.write_text(
         f'[[object]]\nmesh = "{bunny_path.as_posix()}"\n[floor]\nresolution = 20\n[lights]\ngrid = [2, 1, 1]\n'
@@ -159,9 +158,8 @@ def test_cli_errors_are_one_line(tmp_path):
 
 def test_cli_cut_bake_and_diff_picture(tmp_path):
     """Default bake (light cut) on spot + floor, then lodprt diff writes a 3-panel PNG with its error numbers."""
-    spot = Path(__file__).resolve().parents[1].parent / "shared" / "models" / "spot.obj"
-    if not spot.is_file():
-        pytest.skip("../shared/models/spot.obj is not present")
+    from conftest import SPOT as spot
+
     scene = tmp_path / "spot.toml"
     scene.write_text(f'[[object]]\nmesh = "{spot.as_posix()}"\n[floor]\nresolution = 30\n[lights]\ngrid = [2, 1, 1]\n')
     out = tmp_path / "s.zarr"

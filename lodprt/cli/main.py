@@ -4,13 +4,15 @@ bake-environment, render-environment, bake-volume, render-volume, bake-neighbour
 The parser is built from the command modules' ``register`` functions (:mod:`lodprt.cli.bake`,
 :mod:`lodprt.cli.inspection`, :mod:`lodprt.cli.frames`, :mod:`lodprt.cli.display`, :mod:`lodprt.cli.environment`,
 :mod:`lodprt.cli.volume`, :mod:`lodprt.cli.export`; their shared arguments are in :mod:`lodprt.cli.args`). Errors lodprt raises on purpose (bad scene, bad store,
-unavailable device) are printed as one line naming the file and field, with exit code 2; anything else is a bug and
-keeps its traceback.
+unavailable device, a full disk) are printed as one line naming the file and field, with exit code 2; Ctrl-C
+(SIGINT) prints one line saying what the command left and exits with 130; anything else is a bug and keeps its
+traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import logging
 import os
 import sys
@@ -43,9 +45,19 @@ def main(argv: list[str] | None = None) -> int:
     except LodprtError as exc:
         print(f"lodprt {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:  # Ctrl-C: a bake's Interrupted says what it left (bake --resume)
+        print(f"lodprt {args.command}: interrupted" + (f": {exc}" if str(exc) else ""), file=sys.stderr)
+        return 130
     except BrokenPipeError:  # the reader went away (lodprt info ... | head): stop quietly, as Unix tools do
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:
+        if exc.errno != errno.ENOSPC:
+            raise
+        where = getattr(args, "out", None) or exc.filename  # a full disk outside a store writer's arrays
+        print(f"lodprt {args.command}: error: {where}: no space left on the device ({exc.filename or 'writing'})",
+              file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

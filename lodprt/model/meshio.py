@@ -9,6 +9,9 @@ pymeshlab's readers are C++ and crash the process on some malformed files (a PLY
 is a segmentation fault, an OFF face index out of range an abort), so it runs in a child process with a time
 limit: a bad file becomes a SceneError, never a crashed or hung bake.
 
+Compressed files: a name ending in ``.gz``, ``.xz`` or ``.bz2`` (``bunny.obj.xz``) is decompressed in memory and
+read as the format its inner suffix names; the test meshes ship this way (``tests/data``).
+
 Placement: positions are rotated so that the file's up axis becomes +y (``up``), then rotated by ``rotate``
 (degrees about x, then y, then z, fixed axes, right-handed), scaled uniformly and translated. Every rotation is
 proper (determinant +1), so triangles keep their winding and normals recomputed from faces follow the geometry.
@@ -16,7 +19,11 @@ proper (determinant +1), so triangles keep their winding and normals recomputed 
 
 from __future__ import annotations
 
+import bz2
+import gzip
+import io
 import logging
+import lzma
 import os
 import signal
 import subprocess
@@ -33,6 +40,9 @@ log = logging.getLogger(__name__)
 #: Largest allowed absolute coordinate after placement. The kernels work in float32, whose largest finite value is
 #: about 3.4e38: squared distances between points up to 2e18 apart stay finite, so every coordinate must be below.
 COORDINATE_LIMIT = 1e18
+
+#: Compressed mesh suffix -> the module whose ``decompress`` reads it.
+COMPRESSED = {".gz": gzip, ".xz": lzma, ".bz2": bz2}
 
 #: Seconds the pymeshlab child process may take to read one file before it counts as hung.
 PYMESHLAB_TIMEOUT = 600.0
@@ -80,10 +90,11 @@ def load_mesh(
     if not isinstance(up, str) or up not in UP_AXES:
         raise SceneError(f"{path}: up: expected one of {', '.join(map(repr, UP_AXES))}, got {up!r}")
     require_file(path, "mesh")
-    verts, faces, points = _read_trimesh(path)
+    data = decompressed(path)
+    verts, faces, points = _read_trimesh(path, data)
     reader = "trimesh"
     if len(faces) == 0:
-        verts, faces = _fallback(path, verts, points)
+        verts, faces = _fallback(path, verts, points, data)
         reader = "pymeshlab (trimesh found no faces)"
     log.info("%s: read with %s: %d vertices, %d triangles", path, reader, len(verts), len(faces))
     _check_coordinates(path, verts, np.inf, "in the file")
@@ -107,6 +118,27 @@ def require_file(path: Path, what: str) -> None:
         raise SceneError(f"{path}: {what} file not found")
 
 
+def mesh_name(path: str | os.PathLike) -> str:
+    """The object name a mesh file gives: its stem without a compression suffix (``bunny.obj.xz`` -> ``bunny``)."""
+    path = Path(path)
+    return Path(path.stem).stem if path.suffix.lower() in COMPRESSED else path.stem
+
+
+def decompressed(path: Path) -> bytes | None:
+    """The decompressed bytes of a ``.gz``/``.xz``/``.bz2`` mesh file (None for any other name); SceneError naming the
+    file when it cannot be decompressed or names no mesh format inside."""
+    codec = COMPRESSED.get(path.suffix.lower())
+    if codec is None:
+        return None
+    if not Path(path.stem).suffix:
+        raise SceneError(f"{path}: mesh file: a compressed mesh names its format before {path.suffix} "
+                         f"(e.g. m.obj{path.suffix})")
+    try:
+        return codec.decompress(path.read_bytes())
+    except (OSError, EOFError, ValueError, lzma.LZMAError) as exc:
+        raise SceneError(f"{path}: cannot decompress the mesh file ({path.suffix}): {exc}") from exc
+
+
 def _check_coordinates(path: Path, verts: np.ndarray, limit: float, when: str) -> None:
     with np.errstate(invalid="ignore"):
         good = (np.abs(verts) < limit).all(axis=1) if limit < np.inf else np.isfinite(verts).all(axis=1)
@@ -119,12 +151,17 @@ def _check_coordinates(path: Path, verts: np.ndarray, limit: float, when: str) -
         )
 
 
-def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices of the meshes, their faces, the vertices trimesh read as point clouds)."""
+def _read_trimesh(path: Path, data: bytes | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices of the meshes, their faces, the vertices trimesh read as point clouds); ``data``: the decompressed
+    bytes of a compressed file, read as its inner suffix's format."""
     import trimesh
 
     try:
-        loaded = trimesh.load_scene(str(path), process=False, maintain_order=True)
+        if data is None:
+            loaded = trimesh.load_scene(str(path), process=False, maintain_order=True)
+        else:
+            loaded = trimesh.load_scene(io.BytesIO(data), file_type=Path(path.stem).suffix[1:].lower(),
+                                        process=False, maintain_order=True)
         mesh = loaded.to_mesh()
     except Exception as exc:  # trimesh raises many types for bad files
         raise SceneError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from exc
@@ -164,11 +201,11 @@ def _rows(path: Path, field: str, data, dtype) -> np.ndarray:
     return arr
 
 
-def _fallback(path: Path, verts: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _fallback(path: Path, verts: np.ndarray, points: np.ndarray, data: bytes | None) -> tuple[np.ndarray, np.ndarray]:
     """pymeshlab's faces for a file trimesh found no faces in, with vertices checked against trimesh's."""
     seen = f"trimesh read {len(verts) + len(points)} vertices and no faces"
     try:
-        pv, pf = _read_pymeshlab(path)
+        pv, pf = _read_pymeshlab(path, data)
     except SceneError as exc:
         raise SceneError(
             f"{path}: field 'faces': no faces: {seen}, and pymeshlab could not read it: {exc}"
@@ -204,10 +241,14 @@ np.save(sys.argv[3], np.ascontiguousarray(m.face_matrix(), dtype=np.int64))
 """
 
 
-def _read_pymeshlab(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices, faces) as pymeshlab reads ``path``, read in a child process (module docstring)."""
+def _read_pymeshlab(path: Path, data: bytes | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) as pymeshlab reads ``path`` (or ``data``, its decompressed bytes, written to a temporary
+    file with the inner suffix), read in a child process (module docstring)."""
     with tempfile.TemporaryDirectory(prefix="lodprt-meshio-") as tmp:
         vfile, ffile = os.path.join(tmp, "v.npy"), os.path.join(tmp, "f.npy")
+        if data is not None:
+            path = Path(tmp) / f"mesh{Path(path.stem).suffix}"
+            path.write_bytes(data)
         try:
             run = subprocess.run(
                 [sys.executable, "-c", _CHILD, str(path), vfile, ffile],

@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import SceneError
-from lodprt.model.meshio import COORDINATE_LIMIT, UP_AXES, load_mesh, require_file  # noqa: F401  (load_mesh is public)
+from lodprt.model.meshio import (  # noqa: F401  (load_mesh is public)
+    COORDINATE_LIMIT, UP_AXES, load_mesh, mesh_name, require_file,
+)
 
 log = logging.getLogger(__name__)
 
@@ -447,7 +449,7 @@ def _object(path: Path, k: int, table) -> tuple[tuple, str]:
     if not isinstance(mesh, str) or not mesh.strip() or "\0" in mesh:
         raise SceneError(f"{where}.mesh: required, a path relative to the scene file, got {_show(mesh)}")
     mesh_path = Path(mesh) if os.path.isabs(mesh) else path.parent / mesh
-    name = table.get("name", Path(mesh).stem)
+    name = table.get("name", mesh_name(mesh))
     if not isinstance(name, str):
         raise SceneError(f"{where}.name: expected a string, got {_show(name)}")
     up = table.get("up", "y")
@@ -508,6 +510,6 @@ def load_scene(spec: str | os.PathLike) -> Scene:
         return scene_from_toml(path)
     pos, faces = load_mesh(path)
     return assemble_scene(
-        [(path.stem, pos, faces, THESIS_MATERIAL)], None, {}, f"{path}: lights", str(path), wheres=[str(path)],
+        [(mesh_name(path), pos, faces, THESIS_MATERIAL)], None, {}, f"{path}: lights", str(path), wheres=[str(path)],
         origins=["the mesh"],
     )

@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 from lodprt.devices import resolve_device
-from lodprt.errors import LodprtError
+from lodprt.errors import Interrupted, LodprtError
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model.scene import Scene
 from lodprt.precompute.baker import Baker, layout, load_kernels, material_tables, ray_offset
@@ -258,11 +258,30 @@ def bake(
             result.samples = compress_finished(out, codec, result.samples)
         return result
     except BaseException as exc:
-        if target is not None and (isinstance(exc, KeyboardInterrupt) or getattr(exc, "resumable", False)):
-            log.warning("%s: interrupted; the finished samples stay in %s for bake --resume", out, target.partial)
-        elif target is not None:
-            target.abort()
+        if target is not None:
+            settle(exc, out, target)
         raise
+
+
+def settle(exc: BaseException, out, target) -> None:
+    """What a failed bake leaves: Ctrl-C keeps the partial folder and becomes ``Interrupted`` (saying so); a
+    ``resumable`` cluster error keeps it too; any other error removes it (a full disk included)."""
+    if isinstance(exc, KeyboardInterrupt) and not isinstance(exc, Interrupted):
+        raise Interrupted(interrupted_message(out, target)) from exc
+    if getattr(exc, "resumable", False):
+        log.warning("%s: interrupted; the finished samples stay in %s for bake --resume", out, target.partial)
+    elif not isinstance(exc, KeyboardInterrupt):
+        target.abort()
+
+
+def interrupted_message(out, target) -> str:
+    """What a bake stopped by Ctrl-C says it left: the partial folder ``bake --resume`` continues, or the store."""
+    partial = getattr(target, "partial", None)
+    if partial is not None and partial.is_dir():
+        done = len(target.positions) - len(target.todo())
+        return (f"{out}: stopped; {done} finished light sample(s) stay in {partial.name}: run the same lodprt bake "
+                "with --resume to finish it (a bake without --resume removes it)")
+    return f"{out}: stopped after the store was written; it is complete"
 
 
 def bake_codec(compress: str, ncoef: int, channels: int, out):
@@ -335,13 +354,18 @@ def _run_samples(job: SampleJob, baker: Baker, lightcut, todo: list[int], jobs: 
         jobs = (os.cpu_count() or 1) if baker.device == "cpu" else 1
     jobs = max(1, min(jobs, len(todo) or 1))
     samples: dict[int, dict] = {}
-    with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=jobs)
+    try:
         futures = [pool.submit(job.compute, baker, lightcut, k) for k in todo]
         for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
             k, *rest = fut.result()
             samples[k] = job.write(k, *rest)
             if progress is not None:
                 progress(done, len(todo))
+    except BaseException:  # Ctrl-C or an error: the samples not started are not baked first
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
     return samples
 
 

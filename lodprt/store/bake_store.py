@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
-from lodprt.store.writer import FORMAT_NAME, TRANSFER_FORMAT, store_format
+from lodprt.store.reader import read_array
+from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_format
 
 log = logging.getLogger(__name__)
 
@@ -59,10 +60,7 @@ class Store:
         of many samples is read one sample at a time, its memory does not grow with the samples read)."""
         if name in self._cache:
             return self._cache[name]
-        try:
-            value = self.root[name][...]
-        except KeyError as exc:
-            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
+        value = read_array(self.root, self.path, name, all_chunks=bool(self.attrs.get(ALL_CHUNKS)))
         if cache:
             self._cache[name] = value
         return value

@@ -1,6 +1,10 @@
 """Reading the stores of a lodprt format other than the point-light bake (``lodprt-transfer``, ``lodprt-volume``,
 ``lodprt-neighbourhood``; docs/FORMAT.md, docs/VOLUMES.md): ``FormatStore`` opens the zarr group, checks its
-``format`` and ``format_version`` and reads its arrays, with errors that name the store and the field."""
+``format`` and ``format_version`` and reads its arrays, with errors that name the store and the field.
+
+``read_array`` is how every store's arrays are read (``Store.read`` too): a garbled chunk, or a chunk file missing
+from a store whose writer stored every chunk (root attribute ``all_chunks``), is a one-line ``StoreError`` naming
+the store and the array, never a zarr traceback nor zeros in place of the lost data."""
 
 from __future__ import annotations
 
@@ -9,6 +13,27 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import StoreError
+from lodprt.store.writer import ALL_CHUNKS
+
+
+def read_array(root, path: Path, name: str, *, all_chunks: bool) -> np.ndarray:
+    """Array ``name`` of the zarr group ``root`` of the store at ``path``, read whole; ``all_chunks``: the writer
+    stored every chunk, so one missing is damage (older stores skipped all-zero chunks, which read as zeros)."""
+    try:
+        arr = root[name]
+    except KeyError as exc:
+        raise StoreError(f"{path}: field '{name}' is missing") from exc
+    hint = f"; inspect the store with: lodprt info {path}"
+    try:
+        value = arr[...]
+        missing = arr.nchunks - arr.nchunks_initialized if all_chunks and arr.size else 0
+    except Exception as exc:  # noqa: BLE001 -- codecs raise RuntimeError, ValueError, ... for a garbled chunk
+        detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise StoreError(f"{path}: array '{name}' is damaged, a chunk cannot be read ({detail}){hint}") from exc
+    if missing:
+        raise StoreError(f"{path}: array '{name}' is damaged, {missing} of its {arr.nchunks} chunk files are "
+                         f"missing{hint}")
+    return value
 
 
 class FormatStore:
@@ -40,10 +65,7 @@ class FormatStore:
                              f"{read}")
 
     def read(self, name: str) -> np.ndarray:
-        try:
-            return self.root[name][...]
-        except KeyError as exc:
-            raise StoreError(f"{self.path}: field '{name}' is missing") from exc
+        return read_array(self.root, self.path, name, all_chunks=bool(self.attrs.get(ALL_CHUNKS)))
 
     def has(self, name: str) -> bool:
         try:

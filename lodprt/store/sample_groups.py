@@ -109,6 +109,11 @@ class SampleGroupWriter(StoreWriter):
         self.scratch.mkdir()
         self.root = zarr.open_group(str(self.scratch), mode="a", zarr_format=3)
 
+    @property
+    def destination(self) -> Path:
+        """The partial store this sample group belongs to (what a disk-full error names)."""
+        return self.partial
+
     def commit(self):  # a sample group is finished with finish(), never committed as a store
         raise StoreError("SampleGroupWriter: call finish(), not commit()")
 

@@ -4,10 +4,17 @@ interrupted bake never leaves a half store and never destroys the previous one. 
 with ``overwrite=True`` and only when it is itself a store of the same format. What a killed bake leaves behind (a
 partial folder, or the previous store parked as ``<name>.replaced-<pid>``) is cleaned up or restored by the next
 writer of the same path (``clean_leftovers``), or adopted by ``bake --resume`` (``dead_partials``).
+
+Every chunk of every array is written, all-zero ones included (zarr would skip them and read them back as zeros),
+so that a reader can tell a missing chunk file from an empty one (``lodprt.store.reader.read_array``). A full
+disk while writing (OSError ENOSPC) becomes a one-line ``DiskFull`` naming the store, what was being written and
+the bytes it needed (``no_space``).
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import glob
 import json
 import logging
@@ -18,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.errors import StoreError
+from lodprt.errors import DiskFull, StoreError
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +42,32 @@ KNOWN_FORMATS = (FORMAT_NAME, TRANSFER_FORMAT, VOLUME_FORMAT, NEIGHBOURHOOD_FORM
 #: host, pid, boot id and process start time of the writer, so a later bake can tell a dead writer from a live one
 #: even when the pid has been reused. Removed before the folder becomes the store (zarr warns about unknown files).
 OWNER_FILE = ".lodprt-owner.json"
+#: root attribute of a store whose every array has every chunk on disk (written by this writer since it stores
+#: all-zero chunks too): a reader treats a missing chunk file there as damage, not as zeros
+ALL_CHUNKS = "all_chunks"
+
+
+def no_space(exc: OSError, store: Path, what: str, needed: int | None = None) -> DiskFull:
+    """The ``DiskFull`` error of ``exc`` (ENOSPC) while writing ``what`` of ``store``: names both, the bytes needed
+    when known and what the file system has free."""
+    try:
+        free = f"{shutil.disk_usage(store.parent).free / 2**20:,.1f} MiB free"
+    except OSError:
+        free = "free space unknown"
+    need = "" if needed is None else f"needed {needed / 2**20:,.1f} MiB uncompressed, "
+    return DiskFull(f"{store}: no space left on the device writing {what} ({need}{free} in {store.parent}); "
+                    "the unfinished store is removed and any earlier store at this path is unchanged")
+
+
+@contextlib.contextmanager
+def disk_space(store: Path, what: str, needed: int | None = None):
+    """Turn an OSError ENOSPC inside the block into ``no_space``'s ``DiskFull``; other errors pass unchanged."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno != errno.ENOSPC:
+            raise
+        raise no_space(exc, store, what, needed) from exc
 
 
 def store_format(path: str | os.PathLike) -> str | None:
@@ -279,9 +312,11 @@ class StoreWriter:
             if _read_owner(self.partial) is None and store_format(self.partial) not in KNOWN_FORMATS:
                 raise StoreError(f"{self.partial}: exists and is not a lodprt partial store; refusing to replace it")
             _remove_tree(self.partial)
-        self.partial.mkdir()
-        _write_owner(self.partial)  # before any zarr file: recognisable from its first moment
-        self.root = zarr.open_group(str(self.partial), mode="a", zarr_format=3)
+        with disk_space(self.path, "the partial store"):
+            self.partial.mkdir()
+            _write_owner(self.partial)  # before any zarr file: recognisable from its first moment
+            self.root = zarr.open_group(str(self.partial), mode="a", zarr_format=3)
+        self.attrs(**{ALL_CHUNKS: True})
 
     def __enter__(self) -> "StoreWriter":
         return self
@@ -306,13 +341,21 @@ class StoreWriter:
         chunks = None
         if chunk_rows and data.ndim and len(data) > chunk_rows:
             chunks = (chunk_rows,) + data.shape[1:]
-        arr = self.root.create_array(name, shape=data.shape, dtype=data.dtype, chunks=chunks or "auto")
-        if data.size:
-            arr[...] = data
+        with disk_space(self.destination, f"array '{name}'", data.nbytes):
+            arr = self.root.create_array(name, shape=data.shape, dtype=data.dtype, chunks=chunks or "auto",
+                                         config={"write_empty_chunks": True})  # every chunk on disk (module doc)
+            if data.size:
+                arr[...] = data
 
     def attrs(self, name: str | None = None, **values) -> None:
-        target = self.root if name is None else self.root.require_group(name)
-        target.attrs.update(values)
+        with disk_space(self.destination, f"the attributes of '{name or '/'}'"):
+            target = self.root if name is None else self.root.require_group(name)
+            target.attrs.update(values)
+
+    @property
+    def destination(self) -> Path:
+        """The store this writer makes (what a disk-full error names)."""
+        return self.path
 
     def commit(self) -> Path:
         """Move the finished store into place. Each step leaves a state ``clean_leftovers`` recovers from: the
@@ -326,7 +369,13 @@ class StoreWriter:
             if backup.exists():
                 raise StoreError(f"{backup}: exists; move it away to replace {self.path}")
             self.path.rename(backup)
-            _write_owner(backup)
+            try:
+                with disk_space(self.path, "the owner record of the store it replaces"):
+                    _write_owner(backup)
+            except BaseException:  # the old store goes back where it was, as it was
+                (backup / OWNER_FILE).unlink(missing_ok=True)
+                backup.rename(self.path)
+                raise
             (self.partial / OWNER_FILE).unlink()
             self.partial.rename(self.path)
             _remove_tree(backup)

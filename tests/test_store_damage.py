@@ -1,0 +1,128 @@
+"""A full disk while a store is written, and a damaged store when one is read: one line naming the store and the
+array, no traceback; a full disk leaves nothing behind and the earlier store at the path as it was."""
+
+import errno
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr.storage
+
+from lodprt.cli.main import main
+from lodprt.errors import DiskFull, StoreError
+from lodprt.store.bake_store import open_store
+from lodprt.store.writer import ALL_CHUNKS, StoreWriter
+
+from conftest import SPOT
+
+FAST = ["--device", "cpu", "--sh-order", "2", "--full", "--no-hierarchy"]
+
+
+def snapshot(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(Path(folder).rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def spot_scene(tmp_path):
+    path = tmp_path / "spot.toml"
+    path.write_text(f'[[object]]\nmesh = "{SPOT.as_posix()}"\n[floor]\nresolution = 12\n[lights]\ngrid = [2, 1, 1]\n')
+    return path
+
+
+def full_disk(monkeypatch, where: str):
+    """zarr's local store refuses (ENOSPC) the first write of a key containing ``where``."""
+    real = zarr.storage.LocalStore.set
+
+    async def refusing(self, key, value):
+        if where in key:
+            raise OSError(errno.ENOSPC, "No space left on device", key)
+        return await real(self, key, value)
+
+    monkeypatch.setattr(zarr.storage.LocalStore, "set", refusing)
+
+
+@pytest.mark.parametrize("where, what", [("scene/normals/c", "array 'scene/normals'"),
+                                         ("samples/00001/coefficients/c", "array 'samples/00001/coefficients'")])
+def test_disk_full_mid_bake_is_one_line_and_leaves_the_old_store(tmp_path, spot_scene, monkeypatch, capsys, where,
+                                                                   what):
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    before = snapshot(out)
+    capsys.readouterr()
+    full_disk(monkeypatch, where)
+    rc = main(["bake", str(spot_scene), "-o", str(out), *FAST, "--sh-order", "3", "--overwrite"])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    line = [ln for ln in err.splitlines() if "error" in ln]
+    assert len(line) == 1 and "Traceback" not in err
+    assert "out.zarr" in line[0] and "no space left on the device" in line[0] and what in line[0]
+    assert "MiB uncompressed" in line[0] and "MiB free" in line[0]
+    assert snapshot(out) == before  # the earlier store, byte for byte
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.zarr", "spot.toml"]  # no partial folder left
+
+
+def test_disk_full_names_the_bytes_needed(tmp_path, monkeypatch):
+    """The bytes the array needed are its uncompressed size (here 3 MiB of float32)."""
+    full_disk(monkeypatch, "big/c")
+    with pytest.raises(DiskFull, match=r"x\.zarr: no space left on the device writing array 'big' \(needed 3\.0 MiB"):
+        with StoreWriter(tmp_path / "x.zarr", overwrite=False) as w:
+            w.array("big", np.zeros((262144, 3), np.float32))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_every_chunk_is_written_and_a_missing_one_is_damage(tmp_path):
+    """All-zero chunks are stored too (zarr would skip them), so a missing chunk file is reported, not read as 0."""
+    w = StoreWriter(tmp_path / "x.zarr", overwrite=False)
+    w.array("zeros", np.zeros((10, 3), np.float32), chunk_rows=4)
+    w.attrs(format="lodprt", format_version=1)
+    path = w.commit()
+    assert json.loads((path / "zarr.json").read_text())["attributes"][ALL_CHUNKS] is True
+    chunks = sorted(p for p in (path / "zeros" / "c").rglob("*") if p.is_file())
+    assert len(chunks) == 3  # rows 0-3, 4-7, 8-9
+    from lodprt.store.reader import read_array
+
+    root = zarr.open_group(str(path), mode="r")
+    np.testing.assert_array_equal(read_array(root, path, "zeros", all_chunks=True), np.zeros((10, 3), np.float32))
+    chunks[1].unlink()
+    with pytest.raises(StoreError, match=r"x\.zarr: array 'zeros' is damaged, 1 of its 3 chunk files are missing; "
+                                         r"inspect the store with: lodprt info"):
+        read_array(root, path, "zeros", all_chunks=True)
+
+
+@pytest.mark.parametrize("damage", ["garble", "delete"])
+def test_damaged_chunk_is_one_line_naming_store_array_and_info(tmp_path, spot_scene, capsys, damage):
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    chunk = next(p for p in sorted((out / "samples" / "00001" / "coefficients").rglob("*")) if p.is_file()
+                 and p.name != "zarr.json")
+    if damage == "garble":
+        chunk.write_bytes(b"\x00garbled" * 7)
+    else:
+        chunk.unlink()
+    capsys.readouterr()
+    rc = main(["radiance", str(out), "--sample", "1", "--eye", "0", "1", "2", "-o", str(tmp_path / "r.npy")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert f"{out}: array 'samples/00001/coefficients' is damaged" in err
+    assert ("cannot be read" if damage == "garble" else "chunk files are missing") in err
+    assert f"lodprt info {out}" in err
+    assert main(["info", str(out)]) == 0  # what the message suggests works on the damaged store
+    assert open_store(out).sample(0)[0].size > 0  # the other samples still read
+
+
+def test_disk_full_outside_a_store_is_one_line_naming_the_output(tmp_path, spot_scene, monkeypatch, capsys):
+    """ENOSPC anywhere else (here numpy writing lodprt radiance's .npy) is one line naming the output, status 2."""
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    capsys.readouterr()
+    rad = tmp_path / "r.npy"
+
+    def refuse(*_a, **_k):
+        raise OSError(errno.ENOSPC, "No space left on device", str(rad))
+
+    monkeypatch.setattr(np, "save", refuse)
+    rc = main(["radiance", str(out), "--sample", "0", "--eye", "0", "1", "2", "-o", str(rad)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert f"{rad}: no space left on the device" in err
