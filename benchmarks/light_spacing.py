@@ -6,8 +6,9 @@ Scene: the Stanford bunny on a 380 x 380 floor (quick: 100 x 100), SH order 4, l
 one vertex hierarchy shared by every bake. The light box is the scene's default slab above the bunny; it is
 sampled by grids of n x 1 x n lights (n = 2, 3, 5, 8; quick: 2, 3). Test lights: 8 fixed random positions in
 the box (the same for every grid), so they fall between samples. For each, the run time's interpolated and
-completed radiance (``Runtime.radiance``, T-12 + T-15, full resolution; default "exact" weights and T-12 as printed)
-toward a fixed eye is compared with exact
+completed radiance (``Runtime.radiance``, full resolution: the default interpolation "direct", M-1, and the thesis
+blend of the samples, T-12 + T-15, with the default "exact" weights and T-12 as printed) toward a fixed eye is
+compared with exact
 Phong with exact visibility at that light (Embree, float64) over the vertices facing the eye, shadow-boundary
 vertices (a neighbour with another shadow state) reported separately. Baseline in the same run: each grid's own
 error at its sample positions (lights on samples: no interpolation error), so the ratio isolates spacing.
@@ -62,19 +63,21 @@ def main():
             out = tmp / f"g{n}.zarr"
             res = bake(sc, out, sh_order=4, device=device, tree=tree, threshold_deg=5.0)
             store = open_store(out)
-            rt = Runtime(store, lod=False, device=device)
-            errs, edge, t12 = [], [], []
-            thesis = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting="t12")
-            default = rt.interp
+            rt = Runtime(store, lod=False, device=device)  # the default interpolation, "direct" (M-1)
+            old = Runtime(store, lod=False, device=device, interpolation="thesis")  # T-12: the samples blended
+            errs, edge, t12, blend = [], [], [], []
+            printed = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], weighting="t12")
+            exact_weights = old.lighting.interp
             for light, (ex, vis) in zip(tests, exact):
                 boundary = shadow_boundary(sc, vis)
-                for interp, acc in ((thesis, t12), (default, errs)):  # the default last: its edges are reported
-                    rt.interp = interp
-                    rt.set_lights([light], colors=[(1.0, 1.0, 1.0)])
-                    rad = rt.radiance(eye)[:, 0].astype(np.float64)
+                # the default last: its edges are reported
+                for r, interp, acc in ((old, printed, t12), (old, exact_weights, blend), (rt, None, errs)):
+                    if interp is not None:
+                        r.lighting.interp = interp
+                    r.set_lights([light], colors=[(1.0, 1.0, 1.0)])
+                    rad = r.radiance(eye)[:, 0].astype(np.float64)
                     acc.append(rel_rmse(rad, ex, sc.referenced & facing & ~boundary))
                 edge.append(rel_rmse(rad, ex, sc.referenced & facing & boundary))
-            rt.interp = default
             on = []
             for k in range(min(store.num_samples, 4)):
                 light = store.light_positions[k].astype(np.float64)
@@ -87,19 +90,20 @@ def main():
                          "spacing_rel": spacing / ext, "bake_s": res.bake_seconds,
                          "mib": sum(s["bytes"] for s in res.samples) / 2**20,
                          "rmse_between": float(np.mean(errs)), "rmse_between_max": float(np.max(errs)),
-                         "rmse_between_t12": float(np.mean(t12)),
+                         "rmse_between_t12": float(np.mean(t12)), "rmse_between_thesis": float(np.mean(blend)),
                          "rmse_edges": float(np.mean(edge)), "rmse_on_samples": float(np.mean(on)),
                          "ratio": float(np.mean(errs)) / max(float(np.mean(on)), 1e-12)})
             print(f"grid {n}x1x{n}: bake {res.bake_seconds:.1f} s, {rows[-1]['mib']:.1f} MiB, error between samples "
                   f"{rows[-1]['rmse_between']:.4f} (on samples {rows[-1]['rmse_on_samples']:.4f})", flush=True)
-            del rt, store
+            del rt, old, store
             shutil.rmtree(out)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
     print(table(rows, [("grid", "grid", "s"), ("samples", "samples", "d"), ("spacing_rel", "spacing/bunny", ".3f"),
                        ("bake_s", "bake s", ".2f"), ("mib", "MiB", ".1f"), ("rmse_between", "rRMSE between", ".4f"),
-                       ("rmse_between_max", "worst light", ".4f"), ("rmse_between_t12", "T-12 as printed", ".4f"), ("rmse_on_samples", "rRMSE on samples", ".4f"),
+                       ("rmse_between_max", "worst light", ".4f"), ("rmse_between_thesis", "thesis blend", ".4f"),
+                       ("rmse_between_t12", "T-12 as printed", ".4f"), ("rmse_on_samples", "rRMSE on samples", ".4f"),
                        ("ratio", "between/on", ".1f"), ("rmse_edges", "rRMSE shadow edges", ".3f")]))
     name = "light_spacing" + ("-quick" if args.quick else "")
     print("wrote", write(name, {"benchmark": "light_spacing", "quick": args.quick, "scene": scene.source,
@@ -113,8 +117,9 @@ def main():
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for ax, key, label in ((axes[0], "spacing_rel", "sample spacing / bunny size"), (axes[1], "mib", "MiB per bake")):
         x = [r[key] for r in rows]
-        ax.plot(x, [r["rmse_between"] for r in rows], "o-", label="lights between samples (mean of 8), exact weights")
-        ax.plot(x, [r["rmse_between_t12"] for r in rows], "^:", label="same, T-12 as printed")
+        ax.plot(x, [r["rmse_between"] for r in rows], "o-", label="lights between samples (mean of 8), direct (M-1)")
+        ax.plot(x, [r["rmse_between_thesis"] for r in rows], "v-.", label="same, thesis blend, exact weights")
+        ax.plot(x, [r["rmse_between_t12"] for r in rows], "^:", label="same, thesis blend, T-12 as printed")
         ax.plot(x, [r["rmse_on_samples"] for r in rows], "s--", label="lights on samples")
         for r in rows:
             ax.annotate(r["grid"], (r[key], r["rmse_between"]), fontsize=8, xytext=(3, 3), textcoords="offset points")

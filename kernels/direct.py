@@ -36,7 +36,12 @@ def light_visibility(
     sample_vis: wp.array2d(dtype=wp.uint8),
     mode: int,
 ):
-    """(visibility in [0, 1], rays cast) of vertex v for light li (M-3, M-4); the vertex faces the light."""
+    """(visibility in [0, 1], rays cast) of vertex v for light li (M-3, M-4); the vertex faces the light. RAYS
+    reads no sample visibility (``sample_vis`` may be a placeholder)."""
+    if mode == int(RAYS):
+        if light_state(mesh, p, n, light, offset) == int(LIT):
+            return 1.0, 1
+        return 0.0, 1
     lit = float(0.0)
     shadowed = float(0.0)
     total = float(0.0)

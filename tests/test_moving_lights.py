@@ -167,15 +167,20 @@ def test_box_shadow_moves_with_the_light(box_shadow, interpolation):
         assert worst > 50  # the cross-fade of shadows (of the radiance or of the visibility): the oracle sees it
 
 
-def test_a_light_on_a_sample_gives_the_sample_back(box_shadow):
-    """M-1 on a sample (w = 1): the direct path returns the stored, completed sample (the thesis path's value)."""
+def test_a_light_on_a_sample_is_the_exact_direct_light(box_shadow):
+    """A direct-only store, light on a sample: the direct path is the float64 Embree bake at that light (no
+    completion error: R_j = 0), the thesis path the stored, completed sample, which the light cut left off it."""
     scene, store = box_shadow
     eye = np.array([0.1, 1.0, 1.0])
     for k in (0, 4, 7):
         p = store.light_positions[k].astype(np.float64)
-        got = runtime_radiance(store, p, eye, "direct")
-        want = runtime_radiance(store, p, eye, "thesis")
-        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+        want = exact(scene, store, p, eye)
+        np.testing.assert_allclose(runtime_radiance(store, p, eye, "direct"), want, rtol=1e-4,
+                                   atol=1e-5 * want.max())
+        stored = store.radiance(k, eye)[:, 0]
+        np.testing.assert_allclose(runtime_radiance(store, p, eye, "thesis"), stored, rtol=1e-5,
+                                   atol=1e-6 * np.abs(stored).max())
+        assert np.abs(stored - want).max() > 1e-3 * want.max()  # the light cut's completion error
 
 
 def test_several_coloured_lights_add(box_shadow):
@@ -222,9 +227,9 @@ def test_light_coefficients_match_the_runtime(box_shadow):
 
 @pytest.mark.warp_debug
 def test_gi_and_compressed_stores_go_through_the_direct_path(box_shadow, tmp_path):
-    """A GI store (1 bounce) and a q8-compressed store: on a sample M-1 gives the (decoded) sample back, and
-    between samples the indirect light survives (the direct path's radiance exceeds the exact direct light on
-    the plane's shadow, where only indirect light arrives)."""
+    """A GI store (1 bounce): on a sample M-1 gives the sample back (R_j carries the indirect light), and between
+    samples the indirect light survives in the plane's direct shadow. A q8-compressed direct-only store: the
+    direct path is the exact direct light, without the codec's error."""
     from lodprt.store.bake_store import open_store
     from lodprt.store.compress import compress_store
 
@@ -233,11 +238,13 @@ def test_gi_and_compressed_stores_go_through_the_direct_path(box_shadow, tmp_pat
     scene, gi = bake_grid(tmp_path, {"plane": grid_plane(41, 2.0), "box": box}, bounces=1)
     compress_store(box_shadow[1].path, tmp_path / "q8.zarr", codec="q8")
     eye = np.array([0.1, 1.0, 1.0])
-    for store in (gi, open_store(tmp_path / "q8.zarr")):
-        p = store.light_positions[4].astype(np.float64)
-        want = runtime_radiance(store, p, eye, "thesis")
-        np.testing.assert_allclose(runtime_radiance(store, p, eye, "direct"), want, rtol=1e-4,
-                                   atol=1e-5 * np.abs(want).max())
+    p = gi.light_positions[4].astype(np.float64)
+    want = runtime_radiance(gi, p, eye, "thesis")
+    np.testing.assert_allclose(runtime_radiance(gi, p, eye, "direct"), want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
+    q8 = open_store(tmp_path / "q8.zarr")
+    between = np.array([0.13, 1.45, -0.07])
+    want = exact(box_shadow[0], q8, between, eye)
+    np.testing.assert_allclose(runtime_radiance(q8, between, eye, "direct"), want, rtol=1e-4, atol=1e-5 * want.max())
     light = np.array([0.1, 1.5, 0.1])
     got = runtime_radiance(gi, light, eye, "direct")
     direct = exact(scene, gi, light, eye)

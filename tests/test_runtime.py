@@ -48,7 +48,9 @@ def converge(rt, camera, lights=None):
 
 
 def test_light_on_sample_reproduces_the_stored_sample(store, rt):
-    """A light exactly on sample k gives sample k's completed coefficients times the light's intensity."""
+    """A light exactly on sample k gives sample k's completed coefficients times the light's intensity (the thesis
+    interpolation; the default one gives the exact direct light there, tests/test_moving_lights.py)."""
+    rt = Runtime(store, device="cpu", interpolation="thesis")
     for k in (0, 4, store.num_samples - 1):
         rt.set_lights(store.light_positions[k], colors=[(0.5, 1.0, 2.0)])
         got = rt.coefficients()

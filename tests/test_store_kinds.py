@@ -65,7 +65,8 @@ def expected_width(kd, ks, order):
 @pytest.mark.parametrize("name", list(KINDS))
 def test_every_radiance_path_agrees(kinds, name):
     """For every store kind, the six radiance paths give the same (V, 3) radiance, channel by channel, and the
-    store holds the coefficient width its material calls for."""
+    store holds the coefficient width its material calls for (the light paths by the thesis interpolation, which
+    reads the stored samples; the direct one, which is exact there, is checked against the closed form below)."""
     from lodprt.runtime.frames import full_frame
     from lodprt.runtime.camera import Camera
     from lodprt.runtime.frames import light_radiance
@@ -86,17 +87,17 @@ def test_every_radiance_path_agrees(kinds, name):
         ref = store.radiance(k, eye)  # radiance --sample K
         scale = scale or float(np.abs(ref[used]).max())
         assert scale > 0 and ref.shape == (store.num_vertices, 3)
-        paths = {"light_radiance": light_radiance(store, light[None], eye)}
+        paths = {"light_radiance": light_radiance(store, light[None], eye, interpolation="thesis")}
         cam = Camera(eye=eye, target=(0.0, 0.1, 0.0), width=64, height=48)
         by_sample = full_frame(store, cam, sample=k)
-        by_light = full_frame(store, cam, lights=light[None])
+        by_light = full_frame(store, cam, lights=light[None], interpolation="thesis")
         for label, fr in (("full_frame(sample)", by_sample), ("full_frame(lights)", by_light)):
             assert fr.coefficients.shape == (len(fr.vertex_ids), 3, ncoef), label
             got = np.zeros_like(ref)
             got[fr.vertex_ids] = fr.radiance
             paths[label] = got
         if hier:
-            rt = Runtime(store, device="cpu")
+            rt = Runtime(store, device="cpu", interpolation="thesis")
             rt.set_lights(light[None])
             paths["Runtime.radiance"] = rt.radiance(eye)
             assert rt.coefficients(used[:5]).shape == (5, 3, ncoef)
@@ -190,6 +191,68 @@ def test_view_cut_relighting_on_every_kind(kinds, name):
     got, want = rt.node_errors(nodes), node_errors_reference(rt, nodes)
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_allclose(got[3], want[3], atol=2e-3)
+
+
+@pytest.mark.warp_debug
+@pytest.mark.parametrize("name", list(KINDS))
+def test_lights_between_samples_on_every_kind(kinds, name):
+    """Every store kind under a light between samples, through every direct interpolation (M-1..M-4, the
+    direct_light kernel on the cut and on the full mesh, with and without a hierarchy): ``light_coefficients``
+    equals ``Runtime.coefficients`` and a frame's radiance equals its coefficients toward the eye; on a diffuse
+    store the lit floor (Embree's visibility, off shadow edges) is as close to kd (N.L) I / d^2 between samples
+    as on them (the light cut's completion error; float32 precision on a full-resolution store)."""
+    from lodprt.runtime.camera import Camera
+    from lodprt.runtime.frames import full_frame, light_coefficients
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store, radiance_toward
+
+    kd, ks, threshold, hier, order = KINDS[name]
+    scene, path = kinds[name]
+    store = open_store(path)
+    light = store.light_positions[[0, 1, 3, 4]].mean(0).astype(np.float64)[None]
+    eye = EYES[0]
+    cam = Camera(eye=eye, target=(0.0, 0.1, 0.0), width=64, height=48)
+    for mode in ("direct", "direct-agree", "direct-blend"):
+        _, _, free = light_coefficients(store, light, interpolation=mode, device="cpu")
+        if ks == 0 and mode != "direct-blend":  # M-4 blends the samples' shadows: not exact between them
+            err = closed_form_error(scene, store, light[0], free, kd)
+            on = max(closed_form_error(scene, store, x, light_coefficients(store, x[None], interpolation=mode,
+                                                                             device="cpu")[2], kd)
+                     for x in store.light_positions[[0, 1, 3, 4]].astype(np.float64))
+            assert err <= (2e-5 if threshold is None else 1.5 * on + 1e-4), (mode, err, on)
+        if hier:
+            rt = Runtime(store, device="cpu", interpolation=mode)
+            rt.set_lights(light)
+            rt.set_camera(cam)
+            fr = rt.update()
+            np.testing.assert_allclose(rt.coefficients(), free, rtol=1e-4, atol=1e-5 * np.abs(free).max())
+            want = radiance_toward(fr.positions, fr.normals, fr.coefficients, eye, np.ones(3))
+            np.testing.assert_allclose(fr.radiance, want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
+        else:
+            fr = full_frame(store, cam, lights=light, interpolation=mode)
+            np.testing.assert_allclose(fr.coefficients, free[fr.vertex_ids], rtol=1e-5,
+                                       atol=1e-6 * np.abs(free).max())
+
+
+def closed_form_error(scene, store, light, coeffs, kd) -> float:
+    """max over RGB and the floor's lit vertices off shadow edges (Embree) of |radiance - kd (N.L) I / d^2|, over
+    the largest closed-form value."""
+    from lodprt.kernels.visibility import LIT
+    from lodprt.precompute import reference
+
+    lit = reference.visibility(reference.EmbreeCaster(scene), scene, light, float(store.attrs["ray_offset"])) == LIT
+    f = scene.faces
+    edge = np.zeros(len(lit), bool)
+    edge[f[lit[f].any(1) & ~lit[f].all(1)].ravel()] = True
+    sel = (scene.object_id == scene.object_id.max()) & lit & ~edge
+    to = light[None, :] - scene.positions[sel]
+    d = np.linalg.norm(to, axis=1)
+    closed = np.clip((scene.normals[sel] * to).sum(1) / d, 0, None) / np.maximum(d, scene.lights.radius) ** 2
+    worst = 0.0
+    for c in range(3):
+        want = np.asarray(kd)[c] * store.intensity[c] * closed
+        worst = max(worst, float(np.abs(coeffs[sel, c, 0] * 0.28209479177387814 - want).max() / want.max()))
+    return worst
 
 
 def cli(*argv):

@@ -57,11 +57,13 @@ def check_glb_output(out, overwrite: bool) -> Path:
 
 def export_frame(store, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                  up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
-                 error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen"):
+                 error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
+                 interpolation: str = DEFAULT_INTERPOLATION):
     """(frame, source) for the export: the run time (or full-resolution frames for stores without a hierarchy)
-    exactly as ``lodprt render`` draws it. ``sample`` K lights the scene with one light at light sample K with the
-    bake's intensity (the run time's T-12 weights select that sample alone); ``lights`` (L, 3) with ``colors`` are
-    interpolated point lights; neither: the middle light sample. ``eye`` defaults to the three-quarter view."""
+    exactly as ``lodprt render`` draws it. ``sample`` K lights the scene with stored light sample K with the bake's
+    intensity (a light there, by the thesis interpolation, whose T-12 weights select that sample alone);
+    ``lights`` (L, 3) with ``colors`` are point lights lit by ``interpolation``; neither: the middle light sample.
+    ``eye`` defaults to the three-quarter view."""
     if sample is not None and lights is not None:
         raise LodprtError("--sample and --light exclude each other")
     if lights is None:
@@ -70,6 +72,7 @@ def export_frame(store, *, sample: int | None = None, lights=None, colors=None, 
         if colors is not None:
             raise LodprtError("--color goes with --light, not with --sample")
         lights, colors = [store.light_positions[k].tolist()], None
+        interpolation = "thesis"  # the stored sample, as radiance --sample K reads it
     elif colors is not None and len(colors) != len(lights):
         raise LodprtError(f"--color: {len(colors)} given for {len(lights)} --light; give one per light or none")
     eye = tuple(eye) if eye is not None else default_eye(store)

@@ -2,12 +2,13 @@
 Phong radiance in closed form times its visibility, plus the interpolated residual of the light samples.
 
     M-1   L(p, s; x) = D(p, s; x) V(p; x) + sum_j w_j R_j(p, s)
-    M-2   R_j(p, s)  = S_j(p, s) - D(p, s; x_j) V_j(p)
+    M-2   R_j(p, s)  = S_j(p, s) - D(p, s; x_j) V_j(p)      (GI stores; 0 on a direct-only store)
 
 ``S_j`` is sample j's stored (completed, decoded) radiance and ``V_j`` its visibility, recast here with the bake's
-kernel and ray offset, so that ``R_j`` holds what has no closed form: indirect light (GI stores), the light cut's
-completion error and a codec's error; on a direct-only store it is 0 on every vertex the light cut kept. On a
-sample (``w_j = 1``) M-1 gives back ``S_j`` exactly. Between samples ``D`` follows the actual light (distance,
+kernel and ray offset, so that on a GI store ``R_j`` holds what has no closed form, the indirect light (with the
+direct part's completion and codec error), and M-1 gives back ``S_j`` on a sample (``w_j = 1``). On a direct-only
+store ``R_j`` would hold only that completion and codec error, which the exact direct term does not have: it is 0
+there, and the result is the bake's own radiance at the actual light. ``D`` follows the actual light (distance,
 N.L, the lobe toward the eye), and ``V`` is one shadow ray toward the light (or, "direct-agree", the samples'
 state where they agree and a ray where they disagree, M-3), so shadows move with the light instead of
 cross-fading.
@@ -74,12 +75,18 @@ class DirectLight:
         self.referenced = np.flatnonzero(store.referenced).astype(np.int32)
         self.ref_ids = wp.array(self.referenced, dtype=wp.int32, device=device)
         self.num_vertices = store.num_vertices
+        # M-2 carries light only where the store holds more than the direct term: GI stores (indirect light). On a
+        # direct-only store R_j is the light cut's completion error and a codec's error alone, which the exact
+        # direct term does not have: R_j = 0 there (the samples' visibility may still decide V, M-3 and M-4)
+        self.residual = int(store.attrs.get("bounces", 0) or 0) > 0
+        self.uses_visibility = self.mode != kdirect.RAYS
 
     # -- per sample (M-2) ----------------------------------------------------------------------------------------
     def split(self, sample: int, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(visibility (V,) uint8, residual (V, C, ncoef) float32) of light sample ``sample`` whose completed
         coefficients are ``coeffs`` (V, C, ncoef): the bake's shadow rays and Phong SH (kernels.visibility,
-        kernels.shading), unreferenced vertices BACK_FACING with their coefficients as given."""
+        kernels.shading), unreferenced vertices BACK_FACING with their coefficients as given. Without a
+        residual (``self.residual`` False: a direct-only store) the coefficients come back as given."""
         from lodprt.kernels import shading as kshade
         from lodprt.kernels import visibility as kvis
 
@@ -89,6 +96,10 @@ class DirectLight:
         vis = wp.zeros(K, dtype=wp.uint8, device=dev)
         wp.launch(kvis.shadow_rays, dim=K, inputs=[self.mesh.id, self.points, self.normals, self.ref_ids, light,
                                                     self.offset], outputs=[vis], device=dev)
+        states = np.full(self.num_vertices, int(kvis.BACK_FACING), np.uint8)
+        states[self.referenced] = vis.numpy()
+        if not self.residual:
+            return states, np.asarray(coeffs, np.float32)
         direct = wp.zeros((K, self.channels, self.ncoef), dtype=wp.float32, device=dev)
         order = self.store.sh_order
         wp.launch(kshade.phong_sh, dim=K, inputs=[self.points, self.normals, self.material_id, self.ref_ids, vis,
@@ -96,8 +107,6 @@ class DirectLight:
                                                   self.radius, wp.zeros((K, order * order), dtype=wp.float32,
                                                                         device=dev)],
                   outputs=[direct], device=dev)
-        states = np.full(self.num_vertices, int(kvis.BACK_FACING), np.uint8)
-        states[self.referenced] = vis.numpy()
         residual = np.asarray(coeffs, np.float32).copy()
         residual[self.referenced] -= direct.numpy()
         return states, residual

@@ -73,12 +73,14 @@ def light_coefficients(store, lights, *, colors=None, weighting: str = "exact", 
     # as wide as the stored coefficients: 1 (y_0 of a diffuse-only store) or order^2
     out = np.zeros((store.num_vertices, 3, store.coefficients_per_vertex))
     used = np.flatnonzero(np.abs(W).sum(1) > 0)
-    vis = np.zeros((store.num_vertices, len(used)), np.uint8)
-    for u, j in enumerate(used):
+    vis = np.zeros((store.num_vertices, max(len(used), 1)), np.uint8)
+    reads = direct is None or direct.residual or direct.uses_visibility
+    for u, j in enumerate(used if reads else []):
         c = store.coefficients(int(j))  # (V, C, ncoef), completed; C = 1 (grey) broadcasts over R, G, B
         if direct is not None:
-            vis[:, u], c = direct.split(int(j), c)  # M-2: the residual R_j
-        out += c * W[j][None, :, None]
+            vis[:, u], c = direct.split(int(j), c)  # M-2: the residual R_j (GI stores)
+        if direct is None or direct.residual:
+            out += c * W[j][None, :, None]
     if direct is not None:
         wp = warp()
         slot = np.full(len(interp.samples), -1, np.int32)

@@ -3,7 +3,7 @@ light samples they use (completed on demand, ``SampleCache``) and the per-vertex
 set of vertices under them, by the chosen interpolation (``lodprt.runtime.direct_light.INTERPOLATIONS``):
 
 * ``"direct"`` (default) and its variants: the actual light's direct radiance in closed form times its visibility,
-  plus the interpolated residual of the samples (M-1, M-2; ``kernels.direct.direct_light`` after
+  plus, on a GI store, the interpolated residual of the samples (M-1, M-2; ``kernels.direct.direct_light`` after
   ``kernels.runtime.relight`` over the residuals);
 * ``"thesis"``: the samples' radiance blended by the T-12 weights (``kernels.runtime.relight``).
 """
@@ -33,10 +33,13 @@ class Relighting:
         self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
                                         weighting=weighting, outside=outside)
         self.direct = None if interpolation == "thesis" else DirectLight(store, device, interpolation)
+        d = self.direct
+        #: the lighting reads the samples' coefficients: T-12, or M-1's residual on a GI store
+        self.uses_samples = d is None or d.residual
         # T-15 per sample when the lights first use it (SPEC 5), float32 slots, vertex-major (V, slots, C, ncoef);
-        # with a direct term the slots hold each sample's residual R_j and its visibility (M-2)
-        self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress,
-                                   split=None if self.direct is None else self.direct.split)
+        # with a direct term the slots hold each sample's residual R_j (GI stores) and its visibility (M-2)
+        split = d.split if d is not None and (d.residual or d.uses_visibility) else None
+        self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress, split=split)
         self.channels, self.ncoef = self.samples.C, self.samples.n
         self.weights = None
         self.rays = 0  # shadow rays the last relight cast (M-3)
@@ -68,6 +71,12 @@ class Relighting:
         """The samples' visibility (V, slots) uint8 on the device, as the cache holds it now."""
         from lodprt.devices import warp
 
+        if self.samples.split is None:  # "direct" on a direct-only store reads no sample visibility
+            from lodprt.devices import warp as warp_
+
+            if self._vis is None:
+                self._vis = warp_().zeros((1, 1), dtype=warp_().uint8, device=self.device)
+            return self._vis
         if self._vis_version != self.samples.version:
             wp, dev = warp(), self.device
             self._vis = wp.array(self.samples.visibility, dtype=wp.uint8, device=dev, copy=dev != "cpu")
@@ -90,12 +99,15 @@ class Relighting:
         from lodprt.devices import warp
 
         ids = np.asarray(vertex_ids, np.int64)
-        c = self.samples.coeffs[ids[:, None], self.used_slots[None, :]]  # (K, U, C, ncoef)
-        w = self.weights[self.used_samples].astype(np.float32)  # (U, 3)
-        if self.channels == 1:
-            out = np.einsum("kui,uc->kci", c[:, :, 0], w, optimize=True)
+        if not self.uses_samples:  # a direct-only store under M-1: the direct term alone
+            out = np.zeros((len(ids), 3, self.ncoef), np.float32)
         else:
-            out = np.einsum("kuci,uc->kci", c, w, optimize=True)
+            c = self.samples.coeffs[ids[:, None], self.used_slots[None, :]]  # (K, U, C, ncoef)
+            w = self.weights[self.used_samples].astype(np.float32)  # (U, 3)
+            if self.channels == 1:
+                out = np.einsum("kui,uc->kci", c[:, :, 0], w, optimize=True)
+            else:
+                out = np.einsum("kuci,uc->kci", c, w, optimize=True)
         ref = self.store.referenced[ids] if self.direct is not None else np.zeros(len(ids), bool)
         if ref.any():  # a vertex no face uses reads 0: no direct term either
             wp = warp()

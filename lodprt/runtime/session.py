@@ -524,6 +524,12 @@ class Runtime:
 
         wp, dev, d = self._wp, self.device, self._d
         A = len(vid)
+        if not self.lighting.uses_samples:  # M-1 on a direct-only store: the direct term alone
+            coef = wp.zeros((A, 3, self.ncoef), dtype=wp.float32, device=dev)
+            rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
+            if A:
+                self.lighting.add_direct(vid, coef, eye=self.camera.eye, radiance=rad, launch=self._launch)
+            return coef.numpy(), rad.numpy()
         coef = wp.empty((A, 3, self.ncoef), dtype=wp.float32, device=dev)  # every entry is written
         rad = wp.empty((A, 3), dtype=wp.float32, device=dev)
         if A:
