@@ -373,7 +373,8 @@ class Runtime:
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
-                *bounds, CRITERIA.index(self.criterion), int(self.interpolation != "thesis"), int(bool(exact)),
+                *bounds, CRITERIA.index(self.criterion), int(self.interpolation != "thesis"),
+                wp.array(self.lighting.bracket_mask(), dtype=wp.int32, device=dev), int(bool(exact)),
                 float(self.error_bound), float(HYSTERESIS), self.geo_rate(), self.area_ref(), self.alpha,
                 wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
