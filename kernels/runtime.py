@@ -138,7 +138,7 @@ def view_errors(
     criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
     sharp: int,  # In: 1 for the direct interpolations (M-5: each sample's S-2 detail at full weight), 0 for T-12
     bracket: wp.array(dtype=wp.int32),  # In: (S,) M-5: 1 for the slots around the light (sharp = 1 only)
-    exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known
+    exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known; 2 every S-1 term
     bound: float,  # In: the error bound (the decision's threshold)
     hysteresis: float,  # In: >= 1; a candidate is collapsed only at or below bound / hysteresis
     geo_rate: float,  # In: S-1 units of white per pixel of geometric error
@@ -219,7 +219,7 @@ def view_errors(
         det = detail_bound(row, used, weights, detail, sharp, bracket)
         e_detail[k] = det
         err[k] = wp.max(geo_term, det * cover)  # S-1 with S-2
-        if exact == 0:
+        if exact != 1:  # 0: decided; 2: S-1 and S-2 in full, without T-14's spread (the frame estimate, E-1)
             return
     sh_basis_fast(vh, bands_of(ncoef), basis, k)  # T-14's spread reads the basis toward the eye
     lum = spread_bound(k, row, used, weights, box_centre, box_half, basis, ncoef)

@@ -9,7 +9,7 @@ from lodprt.display.pictures import check_output
 from lodprt.display.render import Renderer
 from lodprt.runtime.frames import auto_white, full_frame
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 
 
 def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,

@@ -30,7 +30,7 @@ from lodprt.errors import LodprtError
 from lodprt.runtime.camera import Camera, default_eye, scene_centre
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 from lodprt.version import __version__
 
 log = logging.getLogger(__name__)

@@ -17,7 +17,7 @@ from lodprt.runtime.frames import auto_white
 from lodprt.errors import LodprtError
 from lodprt.runtime.camera import orbit, rotate_about
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 
 log = logging.getLogger(__name__)
 

@@ -32,7 +32,7 @@ from lodprt.display.render import Renderer
 from lodprt.runtime.camera import rotate_about
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 
 log = logging.getLogger(__name__)
 
