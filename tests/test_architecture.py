@@ -157,3 +157,23 @@ def test_public_api_resolves_and_open_is_deprecated():
     with pytest.warns(DeprecationWarning, match="open_store"):
         assert lodprt.open is lodprt.open_store
     assert callable(lodprt.bake) and lodprt.bake.__module__ == "lodprt.precompute.bake"
+
+
+def test_package_docstring_example_calls_functions():
+    """Every ``lodprt.NAME(...)`` call in the package docstring's example names a callable (not a module, as
+    ``lodprt.precompute.bake(...)`` once did), and its keyword arguments are parameters of that callable."""
+    import inspect
+    import re
+
+    import lodprt
+
+    calls = re.findall(r"lodprt\.([\w.]+)\(([^()]*(?:\([^()]*\)[^()]*)*)\)", lodprt.__doc__)
+    assert len(calls) >= 10
+    for dotted, args in calls:
+        obj = lodprt
+        for part in dotted.split("."):
+            obj = getattr(obj, part)
+        assert callable(obj) and not inspect.ismodule(obj), dotted
+        params = inspect.signature(obj).parameters
+        for kw in re.findall(r"(?<![\w=])(\w+)=", args):
+            assert kw in params or any(p.kind is p.VAR_KEYWORD for p in params.values()), (dotted, kw)

@@ -135,13 +135,19 @@ class Scene:
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) min and max corner of the referenced vertices."""
-        p = self.positions[self.referenced] if self.referenced.any() else self.positions
-        return np.stack([p.min(axis=0), p.max(axis=0)])
+        return referenced_bounds(self.positions, self.referenced)
 
     @property
     def diagonal(self) -> float:
         b = self.bounds
         return float(np.linalg.norm(b[1] - b[0]))
+
+
+def referenced_bounds(positions: np.ndarray, referenced: np.ndarray) -> np.ndarray:
+    """(2, 3) min and max corner of the referenced vertices (of all of them when none is referenced): a vertex no
+    face uses is never baked nor drawn, so it does not size anything."""
+    p = positions[referenced] if referenced.any() else positions
+    return np.stack([p.min(axis=0), p.max(axis=0)])
 
 
 # ---------------------------------------------------------------------------------------------------------------
