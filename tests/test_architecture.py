@@ -177,3 +177,20 @@ def test_package_docstring_example_calls_functions():
         params = inspect.signature(obj).parameters
         for kw in re.findall(r"(?<![\w=])(\w+)=", args):
             assert kw in params or any(p.kind is p.VAR_KEYWORD for p in params.values()), (dotted, kw)
+
+
+def test_cli_choices_are_the_library_lists():
+    """The transfer modes and view-cut criteria the CLI offers are the library's (the CLI keeps copies so that
+    ``lodprt --help`` imports no bake and no run time)."""
+    from lodprt.cli.environment import TRANSFERS
+    from lodprt.cli.main import build_parser
+    from lodprt.precompute.transfer import MODES
+    from lodprt.runtime.session import CRITERIA
+
+    assert TRANSFERS == MODES
+    choices = set()
+    for action in build_parser()._subparsers._group_actions[0].choices.values():
+        for a in action._actions:
+            if "--criterion" in a.option_strings:
+                choices.add(tuple(a.choices))
+    assert choices == {CRITERIA}

@@ -15,27 +15,7 @@ from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.kernels.visibility import BACK_FACING
 from lodprt.model import sh
-from lodprt.model.scene import Scene
-
-#: ray-origin offset as a fraction of the bounding diagonal of the referenced vertices (every bake: point-light,
-#: transfer, neighbourhood)
-RAY_OFFSET_FRACTION = 1e-4
-
-
-def ray_offset(scene: Scene) -> float:
-    """Ray-origin offset in scene units: scales with the scene's size and with float32 resolution of its coordinates,
-    both taken over the referenced vertices (``Scene.bounds``: a far vertex no face uses changes nothing)."""
-    return bounds_offset(scene.bounds)
-
-
-def bounds_offset(bounds: np.ndarray) -> float:
-    """:func:`ray_offset` of a scene whose referenced vertices span ``bounds`` ((2, 3) min and max corner)."""
-    bounds = np.asarray(bounds, np.float64)
-    coord = float(np.abs(bounds).max())
-    diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
-    # a Python float: numpy's float32 eps would make the product float32, which the store's JSON attributes refuse
-    return max(RAY_OFFSET_FRACTION * diagonal, 64.0 * float(np.finfo(np.float32).eps) * coord)
-
+from lodprt.model.scene import Scene, ray_offset  # noqa: F401  (ray_offset: the bake's, re-exported)
 
 def layout(scene: Scene, sh_order: int) -> tuple[int, int]:
     """(coefficients per vertex, channels) the scene needs: 1 coefficient without specular, 1 channel when grey."""

@@ -17,8 +17,7 @@ import numpy as np
 from lodprt.devices import launch_ranges, load_kernels, resolve_device, warp
 from lodprt.errors import LodprtError
 from lodprt.model import sh
-from lodprt.model.scene import referenced_bounds
-from lodprt.precompute.baker import bounds_offset, ray_offset
+from lodprt.model.scene import bounds_offset, ray_offset, referenced_bounds
 from lodprt.store.transfer_store import prepare_transfer_destination, write_transfer_store
 
 log = logging.getLogger(__name__)
@@ -81,7 +80,7 @@ class Geometry:
         alb = np.broadcast_to(np.asarray(albedo, np.float64), pos.shape).copy()
         ref = np.zeros(len(pos), bool)
         ref[fc.ravel()] = True
-        # the point-light bake's offset (lodprt.precompute.baker.ray_offset), over the referenced vertices
+        # the point-light bake's offset (lodprt.model.scene.ray_offset), over the referenced vertices
         off = bounds_offset(referenced_bounds(pos, ref)) if offset is None else float(offset)
         refl = None
         if mirror is not None:
