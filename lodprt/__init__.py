@@ -3,7 +3,7 @@
 Public API (everything else may change)::
 
     scene = lodprt.load_scene("demo")                 # or a TOML scene file or a mesh path
-    result = lodprt.precompute.bake(scene, "out.zarr", sh_order=4, device="cpu")
+    result = lodprt.bake(scene, "out.zarr", sh_order=4, device="cpu")   # a BakeResult
     store = lodprt.open_store("out.zarr")
     rgb = store.radiance(sample=0, eye=(0.0, 0.5, 1.0))   # (V, 3) float32
     rt = lodprt.Runtime(store)                        # moving lights, view cut (criterion "screen")

@@ -96,6 +96,8 @@ def add_camera(p: argparse.ArgumentParser, *, eye_required: bool = True, up: boo
 
 def add_view_cut(p: argparse.ArgumentParser) -> None:
     """The view cut's criterion and bounds (docs/RUNTIME.md)."""
+    # the library's list is lodprt.runtime.session.CRITERIA; the parser keeps its own copy so that `lodprt --help`
+    # does not import the run time (tests/test_architecture.py checks that the two agree)
     p.add_argument("--criterion", choices=("screen", "thesis"), default="screen",
                    help="view-cut criterion: 'screen' bounds the error on screen (luminance in units of white, "
                         "geometry in pixels; default), 'thesis' is T-14's blend alpha e_geo + (1 - alpha) e_lumi")
