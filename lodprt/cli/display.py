@@ -126,7 +126,7 @@ def _view_setup(args, store):
 
 def _view_cut(args) -> dict:
     return {"error_bound": args.error_bound, "alpha": args.alpha, "criterion": args.criterion,
-            "interpolation": args.interpolation}
+            "interpolation": args.interpolation, "target_psnr": args.target_psnr}
 
 
 def _draw_options(args) -> dict:

@@ -316,7 +316,7 @@ class Viewer:
     """The window loop: events change a ``ViewerState``; a changed state asks the run time for a new frame."""
 
     def __init__(self, store, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
+                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True):
         _check_display()
@@ -341,7 +341,7 @@ class Viewer:
         except Exception as exc:  # no X server behind DISPLAY, no GLX, no OpenGL 3.3
             raise LodprtError(f"cannot open a window on DISPLAY={os.environ.get('DISPLAY')!r}: {exc}") from exc
         self.source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                                   interpolation=interpolation)  # after the window: fail fast
+                                   interpolation=interpolation, target_psnr=target_psnr)  # after the window: fail fast
         w = self.window
         self.renderer = Renderer(w.ctx)
         self.overlay = _Overlay(w.ctx)

@@ -40,7 +40,7 @@ def check_target(psnr) -> float | None:
     if psnr is None:
         return None
     p = float(psnr)
-    if not (0 < p <= 200) or not math.isfinite(p):
+    if not math.isfinite(p) or not 0 < p <= 200:
         raise LodprtError(f"target_psnr {psnr}: must be a PSNR in dB in (0, 200]")
     return p
 

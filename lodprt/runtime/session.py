@@ -54,6 +54,8 @@ HYSTERESIS = 1.25
 BACKOFF_EDGES = 20_000
 #: E-4: steering rounds of the first frame with a target_psnr (each converges the cut for the new bound)
 FIRST_ROUNDS = 12
+#: E-4: the relative change of the bound below which the steering keeps it
+STEER_STEP = 0.1
 #: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
 CRITERIA = ("screen", "thesis")
 #: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
@@ -88,8 +90,7 @@ class Runtime:
     covers (above AREA_SHARE of the screen by the square root of its area), and its geometric error in pixels at
     ``pixel_tolerance`` per default bound, each against the bound) or "thesis" (T-14: ``alpha e_geo + (1 - alpha)
     e_lumi``); error_bound: refine above, coarsen at or below bound / HYSTERESIS (None: the criterion's default,
-    DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs
-    e_geo against e_lumi (T-14 only);
+    DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs e_geo against e_lumi;
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
@@ -99,6 +100,8 @@ class Runtime:
     fewer than one frame's samples): a sample is completed (T-15) when the lights first give it a weight
     (``lodprt.runtime.samples.SampleCache``);
     progress(done, total): called as the light samples a frame needs are completed;
+    target_psnr: with the screen criterion, steer the bound toward this estimated PSNR of the frame against the
+    full mesh (E-1..E-4, ``lodprt.runtime.frame_error``; ``error_bound`` is then the starting bound);
     interpolation: how a light between samples is lit (``lodprt.runtime.direct_light.INTERPOLATIONS``): "direct"
     (default: the light's direct Phong radiance in closed form times a shadow ray's visibility, plus the samples'
     interpolated residual, M-1, M-2), "direct-agree" (rays only where the samples disagree, M-3), "direct-blend"
@@ -488,12 +491,13 @@ class Runtime:
         lut[vid] = np.arange(len(vid), dtype=np.int32)
         return vid, np.take(lut, self._tri.faces(self.cut.anc))
 
-    def _estimate(self, vid: np.ndarray, tri: np.ndarray) -> None:
+    def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray) -> None:
         """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr, E-4: the bound for the next
-        frames (a change of more than 5% re-evaluates every candidate)."""
+        frames, changed when it moves by more than STEER_STEP (the cached errors stay: a node cached under the old
+        bound is evaluated again when due)."""
         self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri)
-        if new is not None and abs(new - self.error_bound) > 0.05 * self.error_bound:
-            self.error_bound, self._dirty, self._refresh_all = new, True, True
+        if new is not None and abs(new - self.error_bound) > STEER_STEP * self.error_bound:
+            self.error_bound, self._dirty = new, True
 
     def update(self, *, max_passes: int | None = None) -> Frame:
         """Move the cut for the current camera and lights, triangulate it, relight it: a ``Frame``."""
@@ -501,14 +505,15 @@ class Runtime:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
         t0 = time.perf_counter()
         self._frame += 1
-        first = not self._converged_once
+        first, jump = not self._converged_once, self._refresh_all
         refined, coarsened, touched, passes = self._converge(max_passes)
         t1 = time.perf_counter()
         vid, tri = self._cut_mesh()
         t2 = time.perf_counter()
-        if self.lod and self.target_psnr is not None:  # E-4: steer the bound; the first frame until it holds
+        due = first or jump or self._frame % REFRESH_FRAMES == 0  # E-4 every few frames and after a jump
+        if self.lod and self.target_psnr is not None and due:  # E-4: steer the bound; the first frame until it holds
             for _ in range(FIRST_ROUNDS if first else 1):
-                self._estimate(vid, tri)
+                self.estimate_frame_error(vid, tri)
                 if not first or not self._dirty:
                     break
                 more = self._converge(10_000)
