@@ -247,6 +247,23 @@ def compression(r: dict) -> str:
                "rRMSE vs cut store", "rRMSE vs exact", "encode s"], rows)
 
 
+def moving_lights(r: dict) -> str:
+    rows = [[f"{row['scene']} + {r['floor']} floor", f"`{row['method']}`",
+             f"{pct(row['rrmse'], 2)} ({pct(row['rrmse_worst'], 2)})", pct(row["rrmse_on_samples"], 2),
+             pct(row["off5"]), f(row["psnr_db"]), f"{f(row['ms'])} ({f(row['p95_ms'])})", f(row["ms_ratio"], 2)]
+            for row in r["rows"] if row["grid"] == "3x1x3"]
+    return md(["scene", "interpolation", "rRMSE between (median, worst light)", "on samples", "> 5% off", "PSNR dB",
+               "ms/frame (p95)", "x thesis"], rows)
+
+
+def moving_lights_mitsuba(r: dict) -> str:
+    m = r["mitsuba"]
+    methods = sorted({k.split("/")[1] for k in m if "/" in k}, key=lambda x: ("direct", "direct-agree",
+                                                                                "direct-blend", "thesis").index(x))
+    rows = [[f"light {case}"] + [f(m[f"{case}/{meth}"]) for meth in methods] for case in m["lights"]]
+    return md(["bunny + {} floor, diffuse, full store".format(m["floor"])] + [f"`{x}` dB" for x in methods], rows)
+
+
 #: marker name -> (results file stem in benchmarks/results, renderer)
 TABLES = {
     "render": ("render", render),
@@ -271,4 +288,6 @@ TABLES = {
     "bake": ("bake", bake),
     "visibility": ("visibility", visibility),
     "compression": ("compression", compression),
+    "moving_lights": ("moving_lights", moving_lights),
+    "moving_lights_mitsuba": ("moving_lights", moving_lights_mitsuba),
 }
