@@ -1,0 +1,76 @@
+"""The S-2 detail bound against brute force (``lodprt.runtime.node_bounds.detail_bounds``): for sampled internal
+nodes of the bunny bake, the largest radiance difference toward 4,000 view directions (scipy's SH basis, not the
+project's) of every completion residual in the node's subtree (found by walking the subtree in the test) and of
+every leaf's step to an original neighbour stays under the node's bound, and the bound is within the
+Cauchy-Schwarz factor of that maximum (not loose)."""
+
+import numpy as np
+import pytest
+
+from test_sh import scipy_real_basis
+
+
+def fibonacci(n: int) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = np.pi * (1 + 5**0.5) * i
+    r = np.sqrt(1 - z * z)
+    return np.c_[r * np.cos(phi), r * np.sin(phi), z]
+
+
+@pytest.fixture(scope="module")
+def case(bunny_bake):
+    from lodprt.runtime import node_bounds
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(bunny_bake)
+    h = store.hierarchy()
+    c = store.complete(4).astype(np.float32)
+    white = 2.0
+    plan = store.completion_plan()
+    d = node_bounds.detail_bounds(h, c, white, plan, node_bounds.leaf_rings(store.faces),
+                                  node_bounds.height_levels(h))
+    return store, h, c, white, plan, d
+
+
+def subtree(h, node: int) -> list[int]:
+    out, todo = [], [node]
+    while todo:
+        k = todo.pop()
+        out.append(k)
+        if h.children[k, 1] >= 0:
+            todo += [int(h.children[k, 0]), int(h.children[k, 1])]
+    return out
+
+
+def test_detail_bound_holds_the_brute_force_maximum(case):
+    store, h, c, white, plan, d = case
+    V = h.num_vertices
+    n = c.shape[2]
+    y = scipy_real_basis(fibonacci(4000), int(round(np.sqrt(n))))[:, :n]  # (Q, n)
+    faces = store.faces
+    neighbours = [set() for _ in range(V)]
+    for a, b in np.r_[faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]:
+        neighbours[a].add(b)
+        neighbours[b].add(a)
+    rng = np.random.default_rng(7)
+    internal = np.arange(V, h.num_nodes)
+    sizes = h.leaf_range[internal, 1] - h.leaf_range[internal, 0]
+    picks = np.r_[rng.choice(internal[sizes <= 40], 60, replace=False), rng.choice(internal[sizes > 40], 15)]
+    tight = 0
+    for node in picks:
+        worst = 0.0
+        for k in subtree(h, int(node)):
+            if k >= V:  # the collapse of node k: T-15's residual at the vertex it removed
+                m = k - V
+                r = int(plan.ring_len[m])
+                res = c[plan.vertex[m]].astype(np.float64) - (plan.weights[m, :r, None, None]
+                                                               * c[plan.neighbours[m, :r]]).sum(0)
+                worst = max(worst, float(np.abs(res @ y.T).max()))
+            else:  # a leaf: its step to each original neighbour
+                for q in neighbours[k]:
+                    worst = max(worst, float(np.abs((c[k] - c[q]).astype(np.float64) @ y.T).max()))
+        bound = float(d[node - V].max()) * white
+        assert worst <= bound * (1 + 1e-4) + 1e-6, (node, worst, bound)
+        tight += bound <= np.sqrt(n) * worst + 1e-6
+    assert tight == len(picks)  # Cauchy-Schwarz over at most sqrt(n) bands: never looser than that
