@@ -260,3 +260,27 @@ def test_unknown_interpolation_is_a_clear_error(box_shadow):
         Runtime(box_shadow[1], device="cpu", interpolation="linear")
     with pytest.raises(LodprtError, match="interpolation"):
         light_coefficients(box_shadow[1], [(0, 1.5, 0)], interpolation="nearest")
+
+
+@pytest.mark.parametrize("interpolation", ["direct", "thesis"])
+def test_interpolation_flag_on_every_point_light_command(box_shadow, tmp_path, gl, interpolation):
+    """``--interpolation`` on radiance, render, frames, compare, turntable and export: every command takes it and
+    runs; radiance writes the API's numbers bit for bit; render --full writes a lit linear image."""
+    from lodprt.cli.main import main
+    from lodprt.runtime.frames import light_radiance
+
+    _, store = box_shadow
+    light, eye = ["0.11", "1.5", "0.09"], ["0.1", "1.0", "1.0"]
+    view = ["--light", *light, "--eye", *eye, "--size", "64", "48", "--interpolation", interpolation]
+    assert main(["radiance", str(store.path), "--light", *light, "--eye", *eye, "--interpolation", interpolation,
+                 "-o", str(tmp_path / "r.npy")]) == 0
+    want = light_radiance(store, [[0.11, 1.5, 0.09]], [0.1, 1.0, 1.0], interpolation=interpolation)
+    np.testing.assert_array_equal(np.load(tmp_path / "r.npy"), want)
+    assert main(["render", str(store.path), *view, "--full", "-o", str(tmp_path / "f.npy")]) == 0
+    for argv in (["render", *view, "-o", tmp_path / "f.png"], ["compare", *view, "-o", tmp_path / "c.png"],
+                 ["turntable", *view, "--frames", "2", "-o", tmp_path / "t"],
+                 ["export", "--light", *light, "--eye", *eye, "--interpolation", interpolation, "-o", tmp_path / "e.glb"],
+                 ["frames", "--frames", "3", "--interpolation", interpolation, "--json"]):
+        assert main([str(argv[0]), str(store.path), *map(str, argv[1:])]) == 0, argv[0]
+    img = np.load(tmp_path / "f.npy")
+    assert img.shape == (48, 64, 3) and img.max() > 0
