@@ -29,6 +29,7 @@ def measured(rt, frame):
         return frame_error(r, frame, full, rt.white)[0]["psnr_db"]
 
 
+@pytest.mark.warp_debug
 @pytest.mark.parametrize("close", [False, True])
 def test_estimate_is_not_optimistic(bunny_store, close):
     """At the default fixed bound, from a far and a close view, light between samples: E-3 <= measured PSNR."""
