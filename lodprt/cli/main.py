@@ -19,6 +19,7 @@ import sys
 
 from lodprt.cli import bake, compress, display, environment, export, frames, inspection, volume
 from lodprt.errors import LodprtError
+from lodprt.version import __version__
 
 COMMAND_MODULES = (bake, compress, inspection, frames, display, environment, volume, export)
 """The command families, in the order ``lodprt --help`` lists their commands."""
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Level-of-detail based precomputed local radiance transfer (bake, inspect, reconstruct).",
     )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details to stderr")
+    p.add_argument("--version", action="version", version=f"lodprt {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in COMMAND_MODULES:
         module.register(sub)
