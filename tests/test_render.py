@@ -346,3 +346,30 @@ def test_cli_turntable_sequence_and_gif(cut_store, tmp_path):
     assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "t.gif")]) == 0
     assert Image.open(tmp_path / "t.gif").n_frames == 4
     assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "seq")]) == 2  # not empty: no clobber
+
+
+def test_cli_render_sample_shows_the_stored_sample(cut_store, tmp_path, capsys):
+    """`render --sample K --full` draws light sample K's stored coefficients: the image equals the renderer's image
+    of ``full_frame(store, camera, sample=K)`` (the stored coefficients times the bake's intensity, no run time),
+    and differs from sample K' 's; --sample with --light is refused."""
+    from lodprt.cli.main import main
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(cut_store)
+    cam = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), fov=40.0, width=160, height=120)
+    view = VIEW[4:]  # the camera of VIEW without its --light
+    images = {}
+    for k in (1, 7):
+        out = tmp_path / f"s{k}.npy"
+        assert main(["render", str(cut_store), "--sample", str(k), "--full", *view, "-o", str(out)]) == 0
+        images[k] = np.load(out)
+    with Renderer() as r:
+        want = r.image(full_frame(store, cam, sample=1), linear=True)
+    assert want.max() > 0
+    close = np.abs(images[1] - want) <= 1e-3 * want.max()
+    assert close.mean() > 0.995, close.mean()
+    assert np.abs(images[7] - want).mean() > 0.02 * want.mean()
+    assert main(["render", str(cut_store), "--sample", "1", *VIEW, "-o", str(tmp_path / "x.npy")]) == 2
+    assert "--sample and --light exclude each other" in capsys.readouterr().err
+    assert main(["render", str(cut_store), "--sample", "99", *view, "-o", str(tmp_path / "x.npy")]) == 2
+    assert "sample 99 out of range" in capsys.readouterr().err

@@ -60,6 +60,9 @@ def _add_render(sub) -> None:
         "background 0, no overlays. Camera: perspective, vertical field of view, right-handed, y up (docs/DISPLAY.md).",
     )
     _add_view_args(rn, "frame.png|frame.npy", required=False)
+    rn.add_argument("--sample", type=int, default=None, metavar="K",
+                    help="light the scene with stored light sample K (one light there, the bake's intensity, the "
+                    "thesis interpolation: exactly that sample's coefficients), instead of --light")
     rn.add_argument("--environment", default=None, metavar="ENV",
                     help="OUT is a transfer store (bake --environment): relight it by this environment instead of point "
                     "lights (as render-environment; 'stored' uses the bake's own)")
@@ -156,6 +159,8 @@ def cmd_render(args) -> int:
     from lodprt.store.bake_store import open_store
 
     store = open_store(args.store)
+    if args.sample is not None:
+        _sample_as_light(args, store)
     lights, colors, camera = _view_setup(args, store)
     stats = render_to_file(store, args.out, lights=lights, colors=colors, camera=camera, lod=not args.full,
                            overwrite=args.overwrite, **_view_cut(args), **_draw_options(args))
@@ -164,10 +169,22 @@ def cmd_render(args) -> int:
     return 0
 
 
+def _sample_as_light(args, store) -> None:
+    """``--sample K``: one light at stored sample K, lit by the thesis interpolation (its T-12 weights select sample
+    K alone, so the frame shows the stored coefficients), as ``export --sample`` and ``radiance --sample`` do."""
+    if args.light:
+        raise LodprtError("--sample and --light exclude each other")
+    if args.color:
+        raise LodprtError("--color goes with --light, not with --sample")
+    store.check_sample(args.sample)
+    args.light = [store.light_positions[args.sample].tolist()]
+    args.interpolation = "thesis"
+
+
 def _render_environment(args) -> int:
     """``render OUT --environment ENV``: a transfer store relit by an environment, as render-environment."""
-    if args.light:
-        raise LodprtError("--light and --environment exclude each other (point lights or an environment)")
+    if args.light or args.sample is not None:
+        raise LodprtError("--light/--sample and --environment exclude each other (point lights or an environment)")
     if args.eye is None:
         raise LodprtError("--environment needs --eye X Y Z")
     return environment_cli.render_environment(

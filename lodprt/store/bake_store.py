@@ -111,6 +111,12 @@ class Store:
         return int(self.root["lights/positions"].shape[0])
 
     @property
+    def light_box(self) -> np.ndarray:
+        """(6,) float64 the sampled light region (xmin, ymin, zmin, xmax, ymax, zmax): lights between samples are
+        interpolated inside it, clamped into it (or refused) outside."""
+        return np.asarray(self.root["lights"].attrs["box"], np.float64)
+
+    @property
     def intensity(self) -> np.ndarray:
         if "lights/intensity" not in self._cache:  # read once: the run time asks every frame
             self._cache["lights/intensity"] = np.asarray(self.root["lights"].attrs["intensity"], dtype=np.float64)
@@ -257,6 +263,7 @@ class Store:
         out["vertices"] = self.num_vertices
         out["faces"] = int(self.root["scene/faces"].shape[0])
         out["lights"] = dict(self.root["lights"].attrs)
+        out["light_box"] = [float(x) for x in self.light_box]
         out["samples"] = samples
         if self.has_hierarchy:
             g = self.root["hierarchy"]
