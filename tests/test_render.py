@@ -373,3 +373,30 @@ def test_cli_render_sample_shows_the_stored_sample(cut_store, tmp_path, capsys):
     assert "--sample and --light exclude each other" in capsys.readouterr().err
     assert main(["render", str(cut_store), "--sample", "99", *view, "-o", str(tmp_path / "x.npy")]) == 2
     assert "sample 99 out of range" in capsys.readouterr().err
+
+
+def test_cli_lights_outside_the_box(cut_store, tmp_path, capsys, caplog):
+    """`render --light` outside the light box with `--outside error` exits 2 with one line naming the box; the
+    default clamps it, and a turntable whose light leaves the box every frame warns once, naming where it went."""
+    import logging
+
+    from lodprt.cli.main import main
+    from lodprt.store.bake_store import open_store
+
+    box = open_store(cut_store).light_box
+    far = ["--light", str(box[3] + 0.5), str(box[4]), str(box[5])]
+    view = VIEW[4:]
+    assert main(["render", str(cut_store), *far, *view, "--outside", "error", "-o", str(tmp_path / "e.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "lodprt render: error: light (" in err
+    assert f"light box) [{box[0]:.4g}, {box[1]:.4g}, {box[2]:.4g}] - [{box[3]:.4g}, {box[4]:.4g}, {box[5]:.4g}]" in err
+    assert not (tmp_path / "e.png").exists()
+    with caplog.at_level(logging.WARNING, logger="lodprt.runtime.lights"):
+        assert main(["turntable", str(cut_store), *far, "--eye", "0.05", "0.3", "0.45", "--size", "40", "30",
+                     "--frames", "4", "-o", str(tmp_path / "t.gif")]) == 0
+    warned = [r for r in caplog.records if "outside the sampled region" in r.getMessage()]
+    assert len(warned) == 1 and f"clamped to ({box[3]:.4g}, {box[4]:.4g}, {box[5]:.4g})" in warned[0].getMessage()
+    for command in ("render", "compare", "turntable", "export", "view", "frames", "radiance"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        assert "--outside {clamp,error}" in capsys.readouterr().out, command

@@ -129,7 +129,7 @@ def _view_setup(args, store):
 
 def _view_cut(args) -> dict:
     return {"error_bound": args.error_bound, "alpha": args.alpha, "criterion": args.criterion,
-            "interpolation": args.interpolation}
+            "interpolation": args.interpolation, "outside": args.outside}
 
 
 def _draw_options(args) -> dict:

@@ -45,7 +45,7 @@ def cmd_frames(args) -> int:
     store = open_store(args.store)
     rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
                   triangle_budget=args.triangle_budget, device=args.device, lod=not args.full,
-                  interpolation=args.interpolation)
+                  interpolation=args.interpolation, outside=args.outside)
     errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
     try:

@@ -36,8 +36,7 @@ def _add_radiance(sub) -> None:
     cli_args.add_sample(which)
     cli_args.add_light(which)
     cli_args.add_colors(r)
-    r.add_argument("--outside", choices=("clamp", "error"), default="clamp",
-                   help="a light outside the sampled region: clamp it into the region with a warning (default) or refuse")
+    cli_args.add_outside(r)
     cli_args.add_interpolation(r)
     cli_args.add_eye(r)
     cli_args.add_output(r, "rad.npy", "output .npy")

@@ -13,7 +13,7 @@ from lodprt.runtime.session import frame_source
 
 
 def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
+                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
                    overwrite: bool = False, scale: float | None = None, wireframe: bool = False,
                    per_vertex: bool = False, exposure: float = 0.0, white: float | None = None,
                    markers: bool = True) -> dict:
@@ -31,7 +31,7 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
 
     out = check_output(out, (".png",), overwrite=overwrite)
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion,
-                          interpolation=interpolation)
+                          interpolation=interpolation, outside=outside)
     error_bound = getattr(source, "error_bound", error_bound)
     source.set_lights(lights, colors)
     source.set_camera(camera)

@@ -101,13 +101,13 @@ class VideoWriter:
 
 
 def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
+                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
                    lod: bool = True, overwrite: bool = False, **draw) -> dict:
     """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped,
     .npy linear (H, W, 3) float32). ``draw`` keywords go to ``Renderer.draw``. Returns the frame's stats."""
     out = check_output(out, (".png", ".npy"), overwrite=overwrite)
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation)
+                          interpolation=interpolation, outside=outside)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     frame = source.update()
@@ -124,7 +124,7 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
 
 def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, light_turns: float = 1.0,
               fps: float = 12.0, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-              criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
+              criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
               overwrite: bool = False, **draw) -> Path:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
     turning ``light_turns`` times the other way about the same axis (clamped to the sampled light region by the
@@ -148,7 +148,7 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation)
+                          interpolation=interpolation, outside=outside)
     images = []
     with Renderer() as renderer, _aborting(video):
         for k in range(frames):

@@ -316,9 +316,13 @@ class Viewer:
     """The window loop: events change a ``ViewerState``; a changed state asks the run time for a new frame."""
 
     def __init__(self, store, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
+                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True):
+        if outside == "error":  # the starting lights; a light dragged out of the box later is clamped
+            from lodprt.runtime.lights import LightInterpolator
+
+            LightInterpolator(store.light_positions, store.light_box, outside="error").clamp(lights)
         _check_display()
         import moderngl_window
         from moderngl_window.conf import settings

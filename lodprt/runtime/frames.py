@@ -141,16 +141,18 @@ class StoreFrames:
 
     lod = False
 
-    def __init__(self, store, interpolation: str = DEFAULT_INTERPOLATION):
+    def __init__(self, store, interpolation: str = DEFAULT_INTERPOLATION, *, outside: str = "clamp"):
         self.store = store
         self.interpolation = interpolation
         self.white = None
         self.camera = None
+        #: lights outside the box are clamped here, once per set_lights (one warning for the source's life)
+        self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], outside=outside)
         self._lights = store.light_positions[store.num_samples // 2][None, :]
         self._colors = None
 
     def set_lights(self, positions, colors=None) -> None:
-        self._lights, self._colors = np.asarray(positions, np.float64).reshape(-1, 3), colors
+        self._lights, self._colors = self.interp.clamp(np.asarray(positions, np.float64).reshape(-1, 3))[0], colors
 
     def set_camera(self, camera) -> None:
         self.camera = camera
