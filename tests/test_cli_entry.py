@@ -113,3 +113,52 @@ def test_api_bake_defaults_are_the_cli_defaults(ball, ball_store, tmp_path):
     with pytest.raises(lodprt.LodprtError, match="needs the hierarchy"):
         lodprt.bake(lodprt.load_scene(ball), tmp_path / "x.zarr", device="cpu", hierarchy=False, threshold_deg=10.0)
 
+
+
+def test_set_camera_by_keyword_and_default_target(ball_store):
+    """``Runtime.set_camera(eye=..., target=...)`` works by keyword, and without a target it looks at the scene's
+    centre (the bounding box centre of the vertices the faces use, computed here independently), as the CLI."""
+    import lodprt
+    from lodprt.runtime.camera import Camera
+
+    store = lodprt.open_store(ball_store[0])
+    rt = lodprt.Runtime(store, device="cpu")
+    cam = rt.set_camera(eye=(0.0, 0.6, 1.5), target=(0.0, 0.2, 0.0), width=64, height=48)
+    assert cam.eye == (0.0, 0.6, 1.5) and cam.target == (0.0, 0.2, 0.0) and (cam.width, cam.height) == (64, 48)
+    used = np.asarray(store.positions)[np.unique(np.asarray(store.faces))]
+    centre = tuple(float(x) for x in (used.min(0) + used.max(0)) / 2)
+    assert rt.set_camera(eye=(0.0, 0.6, 1.5)).target == pytest.approx(centre)
+    assert rt.set_camera((0.0, 0.6, 1.5)).target == pytest.approx(centre)
+    assert rt.update().stats["triangles"] > 0
+    with pytest.raises(lodprt.LodprtError, match="eye given twice"):
+        rt.set_camera((0, 0, 1), eye=(0, 0, 1))
+    with pytest.raises(lodprt.LodprtError, match="give the eye"):
+        rt.set_camera(target=(0, 0, 0))
+    with pytest.raises(lodprt.LodprtError, match="not both"):
+        rt.set_camera(Camera(eye=(0, 0, 1), target=(0, 0, 0)), eye=(0, 0, 2))
+
+
+def test_short_reprs(ball, ball_store):
+    """Store, Scene, BakeResult and Frame print one short line each, never an array."""
+    import lodprt
+
+    store = lodprt.open_store(ball_store[0])
+    scene = lodprt.load_scene(ball)
+    rt = lodprt.Runtime(store, device="cpu")
+    rt.set_camera(eye=(0.0, 0.6, 1.5))
+    frame = rt.update()
+    result = lodprt.bake(scene, None, sh_order=2, device="cpu")
+    for obj, words in ((store, f"{store.num_vertices:,} vertices"), (scene, f"{scene.num_vertices:,} vertices"),
+                       (result, "4 samples"), (frame, f"{len(frame.triangles):,} triangles")):
+        text = repr(obj)
+        assert words in text and "\n" not in text and "array" not in text and len(text) < 200, text
+
+
+def test_overwrite_errors_name_the_argument_or_the_flag(ball, ball_store, tmp_path):
+    """An existing output: the library says ``overwrite=True``, the command line ``--overwrite``."""
+    import lodprt
+
+    with pytest.raises(lodprt.StoreError, match=r"pass overwrite=True to replace it"):
+        lodprt.bake(lodprt.load_scene(ball), ball_store[0], sh_order=2, device="cpu")
+    r = run_cli("bake", ball, "-o", ball_store[0], "--sh-order", "2")
+    assert r.returncode == 2 and "pass --overwrite to replace it" in r.stderr and "overwrite=True" not in r.stderr

@@ -39,13 +39,24 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: the library's words for an argument, and the flag the command line has for it
+FLAGS = {"overwrite=True": "--overwrite"}
+
+
+def as_flags(message: str) -> str:
+    """A library error as the command line says it: ``overwrite=True`` becomes ``--overwrite``."""
+    for api, flag in FLAGS.items():
+        message = message.replace(api, flag)
+    return message
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
     try:
         return args.handler(args)
     except LodprtError as exc:
-        print(f"lodprt {args.command}: error: {exc}", file=sys.stderr)
+        print(f"lodprt {args.command}: error: {as_flags(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C: a bake's Interrupted says what it left (bake --resume)
         print(f"lodprt {args.command}: interrupted" + (f": {exc}" if str(exc) else ""), file=sys.stderr)

@@ -31,7 +31,7 @@ def check_output(path, suffixes: tuple[str, ...], *, overwrite: bool) -> Path:
     if not path.parent.is_dir():
         raise LodprtError(f"{path}: the folder {path.parent} does not exist")
     if path.exists() and not overwrite:
-        raise LodprtError(f"{path}: already exists; pass --overwrite to replace it")
+        raise LodprtError(f"{path}: already exists; pass overwrite=True to replace it")
     return path
 
 
@@ -143,7 +143,7 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
     elif out.suffix:
         raise LodprtError(f"{out}: give a folder (PNG sequence), a .gif or an .mp4 path")
     elif out.exists() and (not out.is_dir() or (any(out.iterdir()) and not overwrite)):
-        raise LodprtError(f"{out}: already exists and is not an empty folder; pass --overwrite to write into it")
+        raise LodprtError(f"{out}: already exists and is not an empty folder; pass overwrite=True to write into it")
     elif not out.parent.is_dir():
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)

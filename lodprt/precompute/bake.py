@@ -52,6 +52,11 @@ class BakeResult:
     hierarchy_seconds: float | None = None
     reused_samples: int = 0  # samples a resumed or extended bake found complete instead of baking them
 
+    def __repr__(self) -> str:
+        kept = sum(int(x.get("vertices_kept", 0)) for x in self.samples) / max(len(self.samples), 1)
+        return (f"BakeResult({self.path!r}: {len(self.samples)} samples, SH order {self.sh_order}, "
+                f"{kept:,.0f} vertices kept per sample, bake {self.bake_seconds:.2f} s on {self.device})")
+
 
 @dataclasses.dataclass
 class SampleJob:

@@ -44,6 +44,10 @@ class Frame:
     camera: Camera
     stats: dict
 
+    def __repr__(self) -> str:
+        return (f"Frame({len(self.positions):,} vertices, {len(self.triangles):,} triangles, {len(self.lights)} "
+                f"light(s), eye {None if self.camera is None else tuple(round(x, 4) for x in self.camera.eye)})")
+
 
 def display(radiance_over_white):
     """The screen intensity of a radiance in units of the white point as the thesis counts it (3.4.2.2): values
@@ -154,8 +158,13 @@ class StoreFrames:
     def set_lights(self, positions, colors=None) -> None:
         self._lights, self._colors = self.interp.clamp(np.asarray(positions, np.float64).reshape(-1, 3))[0], colors
 
-    def set_camera(self, camera) -> None:
-        self.camera = camera
+    def set_camera(self, camera=None, target=None, *, eye=None, **fields) -> Camera:
+        """As ``Runtime.set_camera``: a ``Camera`` or its fields, the target defaulting to the scene's centre."""
+        from lodprt.runtime.camera import camera_for, scene_centre
+
+        centre = None if target is not None or isinstance(camera, Camera) else scene_centre(self.store)
+        self.camera = camera_for(camera, eye=eye, target=target, default_target=centre, **fields)
+        return self.camera
 
     def set_lod(self, enabled: bool) -> None:
         if enabled:

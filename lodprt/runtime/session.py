@@ -24,7 +24,7 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.runtime import node_bounds
-from lodprt.runtime.camera import Camera, as_camera, clip_planes, view_projection
+from lodprt.runtime.camera import Camera, camera_for, clip_planes, scene_centre, view_projection
 from lodprt.runtime.frames import Frame, StoreFrames
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
@@ -171,6 +171,7 @@ class Runtime:
         self._stamp = np.full(h.num_nodes, -1, np.int64)
         self._refresh_all = True  # the next frame evaluates every candidate (set by jumps and new bounds)
         self.camera: Camera | None = None
+        self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
             self._node_bounds("detail" if criterion == "screen" else "box_centre")
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
@@ -323,14 +324,14 @@ class Runtime:
         self.sample_weights, self.used_samples, self.used_slots = W, lit.used_samples, lit.used_slots
 
     def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
-                   near=None, far=None) -> Camera:
-        """A ``Camera`` or its fields (``set_camera(eye, target, up, fov, width, height)``)."""
+                   near=None, far=None, *, eye=None) -> Camera:
+        """A ``Camera`` or its fields: ``set_camera(eye, target, ...)`` or ``set_camera(eye=..., target=...)``;
+        ``target`` defaults to the scene's centre (``lodprt.runtime.camera.scene_centre``, as the command line)."""
         old = self.camera
-        if isinstance(camera, Camera):
-            self.camera = camera
-        else:
-            self.camera = as_camera(camera, target=target, up=up, fov=fov, width=width, height=height,
-                                     near=near, far=far)
+        if self._centre is None and target is None and not isinstance(camera, Camera):
+            self._centre = scene_centre(self.store)
+        self.camera = camera_for(camera, eye=eye, target=target, default_target=self._centre, up=up, fov=fov,
+                                 width=width, height=height, near=near, far=far)
         self._dirty = True
         if old is None or self._camera_jump(old, self.camera):
             self._refresh_all = True

@@ -55,6 +55,12 @@ class Store:
         self.codec = str(self.attrs.get("codec", "none")) if version == 2 else "none"
         self._cache: dict[str, np.ndarray] = {}
 
+    def __repr__(self) -> str:
+        mode = self.attrs.get("mode", "?")
+        cut = f" {self.attrs['threshold_deg']:g} deg" if self.attrs.get("threshold_deg") is not None else ""
+        return (f"Store({str(self.path)!r}: {self.num_vertices:,} vertices, {self.num_samples} light samples, "
+                f"SH order {self.sh_order}, {mode}{cut}, codec {self.codec})")
+
     def read(self, name: str, *, cache: bool = True) -> np.ndarray:
         """Array ``name`` as written; kept on this Store unless ``cache`` is False (a light sample's rows: a store
         of many samples is read one sample at a time, its memory does not grow with the samples read)."""
