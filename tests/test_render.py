@@ -400,3 +400,25 @@ def test_cli_lights_outside_the_box(cut_store, tmp_path, capsys, caplog):
         with pytest.raises(SystemExit):
             main([command, "--help"])
         assert "--outside {clamp,error}" in capsys.readouterr().out, command
+
+
+def test_one_white_for_the_frames_of_a_runtime(cut_store):
+    """Frames of one Runtime along an orbit carry its white, and ``Renderer`` tone-maps every one of them with it
+    (no white point per frame: the per-frame 99th percentile differs from frame to frame here)."""
+    from lodprt.runtime.camera import orbit
+    from lodprt.runtime.frames import auto_white
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    rt = Runtime(open_store(cut_store), device="cpu")
+    start = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), fov=40.0, width=64, height=48)
+    whites, own = [], []
+    with Renderer() as r:
+        for k in range(3):
+            rt.set_camera(orbit(start, 2 * np.pi * k / 3))
+            frame = rt.update()
+            assert frame.white == rt.white
+            whites.append(r.draw(frame)["white"])
+            own.append(auto_white(frame.radiance))
+    assert whites == [rt.white] * 3
+    assert len(set(own)) == 3  # what a white per frame would have done

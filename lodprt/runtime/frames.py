@@ -30,7 +30,10 @@ class Frame:
     radiance (A, 3) float32 linear RGB radiance toward ``camera.eye`` (T-7 per vertex);
     lights (L, 3) float64 light positions as used (after clamping), light_colors (L, 3) float64 RGB intensities;
     camera the ``Camera``; stats a dict (triangles, active_nodes, nodes_touched, refined, coarsened, ms_cut,
-    ms_triangulate, ms_relight, ms_total, ...).
+    ms_triangulate, ms_relight, ms_total, ...);
+    white the radiance its source shows as white (the ``Runtime``'s or ``StoreFrames``' fixed white point, one for
+    every frame of the source, so that a sequence does not flicker; None for a frame made alone: the renderer then
+    picks one from the frame).
     """
 
     vertex_ids: np.ndarray
@@ -43,6 +46,7 @@ class Frame:
     light_colors: np.ndarray
     camera: Camera
     stats: dict
+    white: float | None = None
 
     def __repr__(self) -> str:
         return (f"Frame({len(self.positions):,} vertices, {len(self.triangles):,} triangles, {len(self.lights)} "
@@ -177,8 +181,9 @@ class StoreFrames:
         t0 = time.perf_counter()
         frame = full_frame(self.store, self.camera, lights=self._lights, colors=self._colors,
                            interpolation=self.interpolation)
-        if self.white is None:
+        if self.white is None:  # the first frame's, kept for every later frame
             self.white = auto_white(frame.radiance)
+        frame.white = self.white
         frame.stats["ms_total"] = 1e3 * (time.perf_counter() - t0)
         return frame
 

@@ -515,7 +515,7 @@ class Runtime:
         return Frame(vertex_ids=vid, positions=np.take(self._pos32, vid, axis=0),
                      normals=np.take(self._nrm32, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
-                     light_colors=self.light_colors.copy(), camera=self.camera, stats=stats)
+                     light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
 
     def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, 3, ncoef) interpolated coefficients and (A, 3) radiance toward the eye of vertices ``vid``
