@@ -422,3 +422,39 @@ def test_one_white_for_the_frames_of_a_runtime(cut_store):
             own.append(auto_white(frame.radiance))
     assert whites == [rt.white] * 3
     assert len(set(own)) == 3  # what a white per frame would have done
+
+
+def test_cli_exr_outputs_read_back_with_openexr(cut_store, tmp_path, capsys, monkeypatch):
+    """`render -o x.exr` writes the linear radiance OpenEXR reads back equal to the `.npy` output's values; `compare
+    -o fig.exr` the two frames and their difference side by side; `turntable -o t.exr` one file per frame; without
+    the openexr package the one-line error names the extra."""
+    OpenEXR = pytest.importorskip("OpenEXR")
+    from lodprt.cli.main import main
+
+    def read(path):
+        with OpenEXR.File(str(path)) as f:
+            return np.array(f.channels()["RGB"].pixels)
+
+    npy, exr = tmp_path / "f.npy", tmp_path / "f.exr"
+    for out in (npy, exr):
+        assert main(["render", str(cut_store), *VIEW, "-o", str(out)]) == 0
+    want, got = np.load(npy), read(exr)
+    assert got.dtype == np.float32 and got.shape == want.shape == (120, 160, 3) and want.max() > 0
+    np.testing.assert_array_equal(got, want)
+    fig = tmp_path / "c.exr"
+    assert main(["compare", str(cut_store), *VIEW, "-o", str(fig)]) == 0
+    panels = read(fig)
+    assert panels.shape == (120, 480, 3)
+    lod, full, diff = panels[:, :160], panels[:, 160:320], panels[:, 320:]
+    np.testing.assert_array_equal(lod, want)  # the view cut's frame, as render draws it
+    np.testing.assert_allclose(diff, np.abs(lod - full), atol=1e-6 * want.max())
+    assert main(["turntable", str(cut_store), *VIEW, "--frames", "2", "-o", str(tmp_path / "t.exr")]) == 0
+    seq = [read(tmp_path / f"t_{k:04d}.exr") for k in range(2)]
+    np.testing.assert_allclose(seq[0], want, atol=1e-6 * want.max())  # the orbit's first view is the camera's
+    assert not np.array_equal(seq[0], seq[1])
+    assert main(["turntable", str(cut_store), *VIEW, "--frames", "2", "-o", str(tmp_path / "t.exr")]) == 2
+    assert "already exists; pass --overwrite" in capsys.readouterr().err
+    monkeypatch.setitem(__import__("sys").modules, "OpenEXR", None)  # as if the extra were not installed
+    assert main(["render", str(cut_store), *VIEW, "-o", str(tmp_path / "g.exr")]) == 2
+    err = capsys.readouterr().err
+    assert "pip install 'lodprt[exr]'" in err and len(err.strip().splitlines()) == 1
