@@ -106,7 +106,7 @@ def _add_turntable(sub) -> None:
 def _add_view(sub) -> None:
     vw = sub.add_parser(
         "view",
-        help="interactive viewer (orbit, drag lights, error bound and alpha, wireframe, LOD toggle)",
+        help="interactive viewer (orbit, drag lights, the criterion's knobs, wireframe, LOD toggle)",
         description="Open a window on the store: drag to orbit, right-drag to pan, wheel to zoom, shift-drag to "
         "move the selected light; keys in docs/DISPLAY.md (H prints them). Needs a display (X11 or Xvfb).",
     )
