@@ -63,8 +63,14 @@ def environment(device: str) -> dict:
 
 
 def write(name: str, results: dict, json_path: str | None) -> Path:
+    """Write ``results`` (which name their ``"benchmark"``, the script's stem) with the code fingerprint of that
+    script (``benchmarks/fingerprint.py``): ``benchmarks/report.py --check`` compares it with the current code's."""
+    from fingerprint import code_fingerprint
+
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = Path(json_path) if json_path else RESULTS / f"{name}.json"
+    script = REPO / "benchmarks" / f"{results['benchmark']}.py"
+    results["code_fingerprint"], results["code_files"] = code_fingerprint(script)
     path.write_text(json.dumps(results, indent=2))
     return _shown(path)
 

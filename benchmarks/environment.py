@@ -104,14 +104,15 @@ def main():
     from lodprt.model import environment as E
     from lodprt.model import irradiance as I
     from lodprt.devices import resolve_device
-    from lodprt.precompute.transfer import Geometry, diffuse_transfer, load_kernels
+    from lodprt.devices import load_kernels
+    from lodprt.precompute.transfer import Geometry, diffuse_transfer, transfer_kernels
 
     device = resolve_device(args.device)
     order = args.sh_order
     scene = scene_for(args.quick)
     geom = Geometry.from_scene(scene, device=device)
     nv = int(geom.referenced.sum())
-    load_s = load_kernels(device)
+    load_s = load_kernels(device, *transfer_kernels())
     lighting = E.procedural("sky", resolution=64).project(order)
     ray_counts = [8, 16, 32] if args.quick else [32, 64, 128, 256]
     ref_rays = 128 if args.quick else 1024

@@ -54,10 +54,11 @@ def rel_rmse(a: np.ndarray, b: np.ndarray) -> float:
 
 def reference(scene, rays: int, bounces: int, device: str) -> list[np.ndarray]:
     """Converged references: per bounce count 0..bounces, (S, V') y_0 of the full-resolution GI radiance."""
-    from lodprt.precompute.baker import Baker, load_kernels
+    from lodprt.devices import load_kernels
+    from lodprt.precompute.baker import Baker, bake_kernels
     from lodprt.precompute.gi import GISettings, attach, constant_coefficient
 
-    load_kernels(device)
+    load_kernels(device, *bake_kernels())
     baker = Baker(scene, 2, device, np.flatnonzero(scene.referenced).astype(np.int32))
     gi = attach(baker, scene, GISettings(bounces=bounces, threshold=0.0, rays=rays, seed=12345))
     per_light = [np.cumsum(gi.pass_radiance(light), axis=0)[:, scene.referenced, 0] for light in scene.lights.positions]

@@ -219,7 +219,7 @@ def mitsuba_figure(images, out, cases, white, name) -> None:
     import matplotlib.pyplot as plt
 
     cols = ("Mitsuba 3",) + METHODS
-    fig, axes = plt.subplots(len(cases), len(cols), figsize=(3.2 * len(cols), 2.7 * len(cases)))
+    fig, axes = plt.subplots(len(cases), len(cols), figsize=(3.2 * len(cols), 3.0 * len(cases)))
     for i, case in enumerate(cases):
         for j, col in enumerate(cols):
             ax = axes[i, j]
@@ -242,15 +242,17 @@ def plot(rows, name: str) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     timed = [r for r in rows if "ms" in r]
-    for m, mark in zip(METHODS, "os^v"):
+    scenes = sorted({r["scene"] for r in rows})
+    for k, (m, mark) in enumerate(zip(METHODS, "os^v")):
+        colour = f"C{k}"
         t = [r for r in timed if r["method"] == m]
-        axes[0].plot([r["ms"] for r in t], [r["rrmse"] for r in t], mark, label=m)
+        axes[0].plot([r["ms"] for r in t], [r["rrmse"] for r in t], mark, color=colour, label=m)
         for r in t:
             axes[0].annotate(r["scene"], (r["ms"], r["rrmse"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        for scene in sorted({r["scene"] for r in rows}):
+        for scene, style in zip(scenes, ("-", "--", ":")):
             s = sorted((r for r in rows if r["method"] == m and r["scene"] == scene), key=lambda r: r["bytes"])
-            axes[1].plot([r["bytes"] / 2**20 for r in s], [r["rrmse"] for r in s], mark + "-", alpha=0.8,
-                         label=m if scene == rows[0]["scene"] else None)
+            axes[1].plot([r["bytes"] / 2**20 for r in s], [r["rrmse"] for r in s], mark + style, color=colour,
+                         alpha=0.8, label=f"{m}, {scene}" if m == METHODS[0] or scene == scenes[0] else None)
     axes[0].set_xlabel("frame time, default orbit (ms, median)")
     axes[1].set_xlabel("store payload (MiB; grids 2x1x2, 3x1x3, 5x1x5)")
     axes[1].set_xscale("log")

@@ -21,13 +21,14 @@ from common import environment, parser, plot_path, table, thesis_scene, write
 def main():
     args = parser(__doc__.splitlines()[0]).parse_args()
     from lodprt.precompute import reference
-    from lodprt.precompute.baker import Baker, load_kernels, ray_offset
+    from lodprt.devices import load_kernels
+    from lodprt.precompute.baker import Baker, bake_kernels, ray_offset
     from lodprt.devices import resolve_device, warp
 
     device = resolve_device(args.device)
     scene = thesis_scene(quick=args.quick)
     wp = warp()
-    load_kernels(device)
+    load_kernels(device, *bake_kernels())
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
     t = time.perf_counter()
     baker = Baker(scene, 1, device, ids)

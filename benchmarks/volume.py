@@ -34,14 +34,15 @@ def main():
     from lodprt.devices import resolve_device
     from lodprt.model.environment import procedural
     from lodprt.model.volume import procedural_volume
-    from lodprt.precompute.volume import VolumeGrid, load_kernels, volume_transfer
+    from lodprt.devices import load_kernels
+    from lodprt.precompute.volume import VolumeGrid, volume_kernels, volume_transfer
 
     device = resolve_device(args.device)
     order = args.sh_order
     spec = "cloud:10" if args.quick else "cloud:16"
     vol = procedural_volume(spec, albedo=0.9)
     nvox = int(np.prod(vol.shape))
-    load_s = load_kernels(device)
+    load_s = load_kernels(device, *volume_kernels())
     grid = VolumeGrid(vol, device=device)
     lighting = procedural("sky", resolution=64).project(order)
     ray_counts = [8, 16, 32] if args.quick else [16, 32, 64, 128]

@@ -25,10 +25,12 @@ def detail_bound(
     weights: wp.array2d(dtype=wp.float32),
     detail: wp.array3d(dtype=wp.float32),
     sharp: int,  # In: 0 sum_j |W_jc| D_jc (T-12 blends the samples); 1 max_j D_jc sum_j |W_jc| (M-5)
+    bracket: wp.array(dtype=wp.int32),  # In: (S,) 1 for the slots whose detail the M-5 max takes (sharp = 1 only)
 ):
     """S-2: max over RGB of sum_j |W_jc| D_jc (units of white, at most 1); D_jc bounds the radiance the subtree's
     completion could miss toward any view direction (``lodprt.runtime.node_bounds.detail_bounds``). M-5 (the
-    direct path's hard shadows between samples): max_j D_jc sum_j |W_jc|, each sample's detail at full weight."""
+    direct path's hard shadows between samples): max_j D_jc sum_j |W_jc| over the samples around the light
+    (``bracket``), each sample's detail at full weight."""
     channels = detail.shape[2]
     dr = float(0.0)
     dg = float(0.0)
@@ -40,15 +42,19 @@ def detail_bound(
         j = used[u]
         for c in range(channels):
             det = detail[row, j, c]
+            near = float(0.0)
+            if sharp == 1:
+                if bracket[j] == 1:
+                    near = det
             if channels == 1 or c == 0:
                 dr += det * wp.abs(weights[j, 0])
-                mr = wp.max(mr, det)
+                mr = wp.max(mr, near)
             if channels == 1 or c == 1:
                 dg += det * wp.abs(weights[j, 1])
-                mg = wp.max(mg, det)
+                mg = wp.max(mg, near)
             if channels == 1 or c == 2:
                 db += det * wp.abs(weights[j, 2])
-                mb = wp.max(mb, det)
+                mb = wp.max(mb, near)
     if sharp == 1:
         tr = float(0.0)
         tg = float(0.0)
@@ -131,7 +137,8 @@ def view_errors(
     detail: wp.array3d(dtype=wp.float32),  # In: (N - V, S, C) S-2 bound of the completion residual / white
     criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
     sharp: int,  # In: 1 for the direct interpolations (M-5: each sample's S-2 detail at full weight), 0 for T-12
-    exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known
+    bracket: wp.array(dtype=wp.int32),  # In: (S,) M-5: 1 for the slots around the light (sharp = 1 only)
+    exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known; 2 every S-1 term
     bound: float,  # In: the error bound (the decision's threshold)
     hysteresis: float,  # In: >= 1; a candidate is collapsed only at or below bound / hysteresis
     geo_rate: float,  # In: S-1 units of white per pixel of geometric error
@@ -209,10 +216,10 @@ def view_errors(
             err[k] = wp.min(err[k], bound)
         return
     if criterion == 0:
-        det = detail_bound(row, used, weights, detail, sharp)
+        det = detail_bound(row, used, weights, detail, sharp, bracket)
         e_detail[k] = det
         err[k] = wp.max(geo_term, det * cover)  # S-1 with S-2
-        if exact == 0:
+        if exact != 1:  # 0: decided; 2: S-1 and S-2 in full, without T-14's spread (the frame estimate, E-1)
             return
     sh_basis_fast(vh, bands_of(ncoef), basis, k)  # T-14's spread reads the basis toward the eye
     lum = spread_bound(k, row, used, weights, box_centre, box_half, basis, ncoef)

@@ -75,6 +75,19 @@ def resolve_device(name: str | None = None) -> str:
     return alias
 
 
+def load_kernels(device: str, *modules) -> float:
+    """Compile or load the Warp modules ``modules`` (``lodprt.kernels.*`` module objects) on ``device`` before any
+    thread launches them; returns the seconds it took. The one place kernels are loaded ahead of use: the point-light
+    bake passes :func:`lodprt.precompute.baker.bake_kernels`, the transfer and volume bakes their own module."""
+    import time
+
+    wp = warp()
+    t0 = time.perf_counter()
+    for module in modules:
+        wp.load_module(module, device=device)
+    return time.perf_counter() - t0
+
+
 def launch_ranges(kernel, n: int, device: str, inputs_for, jobs: int | None) -> None:
     """Launch ``kernel`` over items 0..n-1 in ``jobs`` contiguous ranges from as many Python threads on the CPU (a
     CPU launch runs on one thread and releases the GIL); ``inputs_for(first)`` gives the inputs of the range that

@@ -157,3 +157,40 @@ def test_public_api_resolves_and_open_is_deprecated():
     with pytest.warns(DeprecationWarning, match="open_store"):
         assert lodprt.open is lodprt.open_store
     assert callable(lodprt.bake) and lodprt.bake.__module__ == "lodprt.precompute.bake"
+
+
+def test_package_docstring_example_calls_functions():
+    """Every ``lodprt.NAME(...)`` call in the package docstring's example names a callable (not a module, as
+    ``lodprt.precompute.bake(...)`` once did), and its keyword arguments are parameters of that callable."""
+    import inspect
+    import re
+
+    import lodprt
+
+    calls = re.findall(r"lodprt\.([\w.]+)\(([^()]*(?:\([^()]*\)[^()]*)*)\)", lodprt.__doc__)
+    assert len(calls) >= 10
+    for dotted, args in calls:
+        obj = lodprt
+        for part in dotted.split("."):
+            obj = getattr(obj, part)
+        assert callable(obj) and not inspect.ismodule(obj), dotted
+        params = inspect.signature(obj).parameters
+        for kw in re.findall(r"(?<![\w=])(\w+)=", args):
+            assert kw in params or any(p.kind is p.VAR_KEYWORD for p in params.values()), (dotted, kw)
+
+
+def test_cli_choices_are_the_library_lists():
+    """The transfer modes and view-cut criteria the CLI offers are the library's (the CLI keeps copies so that
+    ``lodprt --help`` imports no bake and no run time)."""
+    from lodprt.cli.environment import TRANSFERS
+    from lodprt.cli.main import build_parser
+    from lodprt.precompute.transfer import MODES
+    from lodprt.runtime.session import CRITERIA
+
+    assert TRANSFERS == MODES
+    choices = set()
+    for action in build_parser()._subparsers._group_actions[0].choices.values():
+        for a in action._actions:
+            if "--criterion" in a.option_strings:
+                choices.add(tuple(a.choices))
+    assert choices == {CRITERIA}

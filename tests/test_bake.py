@@ -7,7 +7,8 @@ from lodprt.model import sh
 
 from lodprt.precompute import reference
 from lodprt.precompute.bake import bake
-from lodprt.precompute.baker import Baker, load_kernels, material_tables
+from lodprt.devices import load_kernels
+from lodprt.precompute.baker import Baker, bake_kernels, material_tables
 from lodprt.kernels import shading as kshade
 from lodprt.kernels.visibility import LIT
 from lodprt.devices import warp
@@ -21,7 +22,7 @@ def small_scene(bunny_path, material=THESIS_MATERIAL, floor=40, lights=None):
 
 
 def bake_one(scene, device, order, light):
-    load_kernels(device)
+    load_kernels(device, *bake_kernels())
     ids = np.arange(scene.num_vertices, dtype=np.int32)
     baker = Baker(scene, order, device, ids)
     return baker.sample(light)

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from lodprt.precompute.bake import bake
-from lodprt.precompute.baker import Baker, load_kernels
+from lodprt.devices import load_kernels
+from lodprt.precompute.baker import Baker, bake_kernels
 from lodprt.model.completion import RULE_BOUNDARY, RULE_T15, CompletionPlan, ring_weights
 from lodprt.precompute.light_cut import LightCut
 from lodprt.model.hierarchy import active_ancestors
@@ -14,7 +15,7 @@ from lodprt.model.scene import Material, assemble_scene, floor_mesh
 
 
 def light_cut(scene, h, device, light, threshold):
-    load_kernels(device)
+    load_kernels(device, *bake_kernels())
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
     baker = Baker(scene, 2, device, ids)
     kept, nodes, dark, coeffs, vis = baker.sample_cut(light, LightCut(h, baker.points, device), threshold)
@@ -26,7 +27,7 @@ def test_cuts_are_valid_fronts(device, bunny_floor, bunny_hierarchy, threshold):
     """Every light cut is a legal front of the hierarchy: each vertex has exactly one active ancestor."""
     h = bunny_hierarchy
     ids = np.flatnonzero(bunny_floor.referenced).astype(np.int32)
-    load_kernels(device)
+    load_kernels(device, *bake_kernels())
     baker = Baker(bunny_floor, 2, device, ids)
     lc = LightCut(h, baker.points, device)
     import warp as wp

@@ -452,9 +452,10 @@ def tiny_bake_cases(draw):
 @pytest.fixture(scope="module")
 def cpu_kernels():
     """Warp's bake kernels compiled (or loaded from its cache) before the first example, outside its deadline."""
-    from lodprt.precompute.baker import load_kernels
+    from lodprt.devices import load_kernels
+    from lodprt.precompute.baker import bake_kernels
 
-    load_kernels("cpu")
+    load_kernels("cpu", *bake_kernels())
 
 
 FAR_TRIANGLE = "v 1000 1000 1000\nv 1001 1000 1000\nv 1000 1000 1001\nf 1 3 2\n"

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from lodprt.runtime.errors_reference import node_errors_reference
+from errors_reference import node_errors_reference
 
 from lodprt.model import sh
 from lodprt.errors import LodprtError

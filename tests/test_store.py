@@ -9,7 +9,8 @@ import pytest
 
 from lodprt.model import sh
 from lodprt.precompute.bake import bake
-from lodprt.precompute.baker import Baker, load_kernels
+from lodprt.devices import load_kernels
+from lodprt.precompute.baker import Baker, bake_kernels
 from lodprt.errors import StoreError
 from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 from lodprt.store.bake_store import open_store
@@ -37,7 +38,7 @@ def test_round_trip_exact(small, baked):
     np.testing.assert_array_equal(store.positions, small.positions.astype(np.float32))
     np.testing.assert_array_equal(store.faces, small.faces)
     np.testing.assert_array_equal(store.light_positions, small.lights.positions.astype(np.float32))
-    load_kernels("cpu")
+    load_kernels("cpu", *bake_kernels())
     ids = np.flatnonzero(small.referenced).astype(np.int32)
     baker = Baker(small, 3, "cpu", ids)
     for k, light in enumerate(small.lights.positions):

@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from lodprt.runtime.errors_reference import node_errors_reference
+from errors_reference import node_errors_reference
 
 from lodprt.errors import LodprtError
 from lodprt.model.scene import Material

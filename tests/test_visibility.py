@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from lodprt.precompute import reference
-from lodprt.precompute.baker import Baker, load_kernels, ray_offset
+from lodprt.devices import load_kernels
+from lodprt.precompute.baker import Baker, bake_kernels, ray_offset
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
@@ -22,7 +23,7 @@ def bunny_floor(bunny_path, resolution=200, scale=1.0):
 
 
 def kernel_visibility(scene, device, light):
-    load_kernels(device)
+    load_kernels(device, *bake_kernels())
     ids = np.arange(scene.num_vertices, dtype=np.int32)
     baker = Baker(scene, 2, device, ids)
     return baker.visibility(light).numpy(), baker.offset
@@ -83,3 +84,23 @@ def test_ray_offset_scales_with_scene(bunny_path):
     a = ray_offset(bunny_floor(bunny_path, resolution=4, scale=1e-4))
     b = ray_offset(bunny_floor(bunny_path, resolution=4, scale=1e4))
     assert b / a == pytest.approx(1e8, rel=1e-6)
+
+
+def test_ray_offset_ignores_a_far_unreferenced_vertex():
+    """One offset for every bake: the point-light bake's (Scene) and the transfer bake's (Geometry) agree, and a vertex
+    no face uses, 1e6 away, changes neither (oracle: 1e-4 of the triangle's own diagonal, worked out by hand)."""
+    from lodprt.precompute.transfer import Geometry
+
+    tri = np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 4.0, 0.0]])
+    far = np.vstack([tri, [[1e6, -1e6, 1e6]]])
+    faces = np.array([[0, 1, 2]])
+    alone = assemble_scene([("tri", tri, faces, THESIS_MATERIAL)], None, {}, "lights", "tri")
+    with_far = assemble_scene([("tri", far, faces, THESIS_MATERIAL)], None, {}, "lights", "tri")
+    assert not with_far.referenced[3]
+    expected = 1e-4 * 5.0  # the triangle's bounding box is 3 x 4 x 0: diagonal 5
+    assert ray_offset(alone) == pytest.approx(expected, rel=1e-12)
+    assert ray_offset(with_far) == pytest.approx(expected, rel=1e-12)
+    normals = np.tile([0.0, 0.0, 1.0], (4, 1))
+    geom = Geometry.from_arrays(far, faces, normals, device="cpu")
+    assert geom.offset == pytest.approx(expected, rel=1e-12)
+    assert Geometry.from_scene(with_far, device="cpu").offset == ray_offset(with_far)

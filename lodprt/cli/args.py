@@ -96,9 +96,14 @@ def add_camera(p: argparse.ArgumentParser, *, eye_required: bool = True, up: boo
 
 def add_view_cut(p: argparse.ArgumentParser) -> None:
     """The view cut's criterion and bounds (docs/RUNTIME.md)."""
+    # the library's list is lodprt.runtime.session.CRITERIA; the parser keeps its own copy so that `lodprt --help`
+    # does not import the run time (tests/test_architecture.py checks that the two agree)
     p.add_argument("--criterion", choices=("screen", "thesis"), default="screen",
                    help="view-cut criterion: 'screen' bounds the error on screen (luminance in units of white, "
                         "geometry in pixels; default), 'thesis' is T-14's blend alpha e_geo + (1 - alpha) e_lumi")
+    p.add_argument("--target-psnr", type=float, default=None, metavar="DB",
+                   help="'screen': steer the bound toward this estimated PSNR of the frame against the full mesh "
+                        "(E-1..E-4 in docs/RUNTIME.md; --error-bound is then the starting bound)")
     p.add_argument("--error-bound", type=float, default=None, metavar="E",
                    help="view cut error bound (default 0.8 of white for 'screen': each coarse node adds at most "
                         "E^2 / 32768 to the frame's mean squared error; 0.25 for 'thesis')")

@@ -20,6 +20,8 @@ ENV_HELP = ("environment: a lat-long .hdr/.exr/.npy (H, 2H, 3), a .npy cube (6, 
 
 # bake-environment's defaults (also those of the short form bake --environment)
 SH_ORDER = 3
+#: lodprt.precompute.transfer.MODES, copied so that `lodprt --help` imports no bake (tests/test_architecture.py
+#: checks that the two agree)
 TRANSFERS = ("unshadowed", "shadowed", "interreflected")
 TRANSFER = "interreflected"
 RAYS = 256

@@ -9,11 +9,12 @@ from lodprt.display.pictures import check_exr, check_output, write_exr
 from lodprt.display.render import Renderer
 from lodprt.runtime.frames import auto_white, full_frame
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 
 
 def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
+                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+                   outside: str = "clamp",
                    overwrite: bool = False, scale: float | None = None, wireframe: bool = False,
                    per_vertex: bool = False, exposure: float = 0.0, white: float | None = None,
                    markers: bool = True) -> dict:
@@ -34,7 +35,7 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     if out.suffix.lower() == ".exr":
         check_exr()
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion,
-                          interpolation=interpolation, outside=outside)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     error_bound = getattr(source, "error_bound", error_bound)
     source.set_lights(lights, colors)
     source.set_camera(camera)

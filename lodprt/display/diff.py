@@ -10,10 +10,11 @@ from lodprt.store.bake_store import Store, radiance_toward
 
 def full_resolution_radiance(store: Store, sample: int, eye, device: str) -> np.ndarray:
     """Re-bake ``sample`` at full resolution from the stored scene (same float32 arrays as the bake): (V, 3)."""
-    from lodprt.precompute.baker import Baker, load_kernels
+    from lodprt.devices import load_kernels
+    from lodprt.precompute.baker import Baker, bake_kernels
 
     scene = store.scene()
-    load_kernels(device)
+    load_kernels(device, *bake_kernels())
     ids = np.flatnonzero(scene.referenced).astype(np.int32)
     baker = Baker(scene, store.sh_order, device, ids)
     coeffs, _ = baker.sample(store.light_positions[sample].astype(np.float64))

@@ -31,7 +31,7 @@ from lodprt.errors import LodprtError
 from lodprt.runtime.camera import Camera, default_eye, scene_centre
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 from lodprt.version import __version__
 
 log = logging.getLogger(__name__)
@@ -59,7 +59,7 @@ def check_glb_output(out, overwrite: bool) -> Path:
 def export_frame(store, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                  up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
                  error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
-                 interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp"):
+                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None, outside: str = "clamp"):
     """(frame, source) for the export: the run time (or full-resolution frames for stores without a hierarchy)
     exactly as ``lodprt render`` draws it. ``sample`` K lights the scene with stored light sample K with the bake's
     intensity (a light there, by the thesis interpolation, whose T-12 weights select that sample alone);
@@ -80,7 +80,7 @@ def export_frame(store, *, sample: int | None = None, lights=None, colors=None, 
     target = tuple(target) if target is not None else scene_centre(store)
     camera = Camera(eye=eye, target=target, up=tuple(up), fov=fov, width=int(size[0]), height=int(size[1]))
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, outside=outside)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     return source.update(), source
@@ -264,8 +264,10 @@ def write_glb(frame, out, *, vertex_colors: str = "display", white: float | None
 
 def export_glb(store, out, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
-               error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION,
-               outside: str = "clamp", vertex_colors: str = "display", white: float | None = None, exposure: float = 0.0,
+               error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
+               interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+               outside: str = "clamp",
+               vertex_colors: str = "display", white: float | None = None, exposure: float = 0.0,
                overwrite: bool = False) -> dict:
     """``lodprt export``: light ``store`` (a Store or a path; ``sample`` K or point ``lights``), take the view cut
     for the camera (``lod=False``: the full mesh) and write the frame as a .glb (:func:`write_glb`). The white of
@@ -281,7 +283,8 @@ def export_glb(store, out, *, sample: int | None = None, lights=None, colors=Non
         sample = store.num_samples // 2
     frame, source = export_frame(store, sample=sample, lights=lights, colors=colors, eye=eye, target=target, up=up,
                                  fov=fov, size=size, lod=lod, error_bound=error_bound, alpha=alpha,
-                                 criterion=criterion, interpolation=interpolation, outside=outside)
+                                 criterion=criterion, interpolation=interpolation, target_psnr=target_psnr,
+                                 outside=outside)
     if vertex_colors == "display" and white is None:
         white = getattr(source, "white", None) or auto_white(frame.radiance)
     extras = {"store": str(store.path), "sample": sample, "lod": bool(getattr(source, "lod", False))}

@@ -17,7 +17,7 @@ from lodprt.runtime.frames import auto_white
 from lodprt.errors import LodprtError
 from lodprt.runtime.camera import orbit, rotate_about
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 
 log = logging.getLogger(__name__)
 
@@ -128,7 +128,8 @@ class VideoWriter:
 
 
 def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
+                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+                   outside: str = "clamp",
                    lod: bool = True, overwrite: bool = False, **draw) -> dict:
     """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped;
     .npy linear (H, W, 3) float32; .exr the same radiance as OpenEXR float32 RGB, needs the ``exr`` extra).
@@ -137,7 +138,7 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
     if out.suffix.lower() == ".exr":
         check_exr()
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, outside=outside)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     frame = source.update()
@@ -154,7 +155,8 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
 
 def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, light_turns: float = 1.0,
               fps: float = 12.0, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-              criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
+              criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+              outside: str = "clamp",
               overwrite: bool = False, **draw) -> Path:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
     turning ``light_turns`` times the other way about the same axis (clamped to the sampled light region by the
@@ -181,7 +183,7 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, outside=outside)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     images = []
     with Renderer() as renderer, _aborting(video):
         for k in range(frames):

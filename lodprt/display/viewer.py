@@ -33,7 +33,7 @@ from lodprt.display.render import Renderer
 from lodprt.runtime.camera import rotate_about
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
-from lodprt.runtime.session import frame_source
+from lodprt.runtime.sources import frame_source
 
 log = logging.getLogger(__name__)
 
@@ -326,7 +326,8 @@ class Viewer:
     """The window loop: events change a ``ViewerState``; a changed state asks the run time for a new frame."""
 
     def __init__(self, store, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp",
+                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+                 outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True):
         if outside == "error":  # the starting lights; a light dragged out of the box later is clamped
@@ -356,7 +357,7 @@ class Viewer:
         except Exception as exc:  # no X server behind DISPLAY, no GLX, no OpenGL 3.3
             raise LodprtError(f"cannot open a window on DISPLAY={os.environ.get('DISPLAY')!r}: {exc}") from exc
         self.source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                                   interpolation=interpolation)  # after the window: fail fast
+                                   interpolation=interpolation, target_psnr=target_psnr)  # after the window: fail fast
         w = self.window
         self.renderer = Renderer(w.ctx)
         self.overlay = _Overlay(w.ctx)

@@ -140,8 +140,7 @@ class Scene:
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) min and max corner of the referenced vertices."""
-        p = self.positions[self.referenced] if self.referenced.any() else self.positions
-        return np.stack([p.min(axis=0), p.max(axis=0)])
+        return referenced_bounds(self.positions, self.referenced)
 
     @property
     def diagonal(self) -> float:
@@ -149,8 +148,35 @@ class Scene:
         return float(np.linalg.norm(b[1] - b[0]))
 
 
+def referenced_bounds(positions: np.ndarray, referenced: np.ndarray) -> np.ndarray:
+    """(2, 3) min and max corner of the referenced vertices (of all of them when none is referenced): a vertex no
+    face uses is never baked nor drawn, so it does not size anything."""
+    p = positions[referenced] if referenced.any() else positions
+    return np.stack([p.min(axis=0), p.max(axis=0)])
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # geometry
+
+
+#: ray-origin offset as a fraction of the bounding diagonal of the referenced vertices (every bake: point-light,
+#: transfer, neighbourhood)
+RAY_OFFSET_FRACTION = 1e-4
+
+
+def ray_offset(scene: "Scene") -> float:
+    """Ray-origin offset in scene units: scales with the scene's size and with float32 resolution of its coordinates,
+    both taken over the referenced vertices (``Scene.bounds``: a far vertex no face uses changes nothing)."""
+    return bounds_offset(scene.bounds)
+
+
+def bounds_offset(bounds: np.ndarray) -> float:
+    """:func:`ray_offset` of a scene whose referenced vertices span ``bounds`` ((2, 3) min and max corner)."""
+    bounds = np.asarray(bounds, np.float64)
+    coord = float(np.abs(bounds).max())
+    diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
+    # a Python float: numpy's float32 eps would make the product float32, which the store's JSON attributes refuse
+    return max(RAY_OFFSET_FRACTION * diagonal, 64.0 * float(np.finfo(np.float32).eps) * coord)
 
 
 def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -23,11 +23,11 @@ from typing import Callable
 
 import numpy as np
 
-from lodprt.devices import resolve_device
+from lodprt.devices import load_kernels, resolve_device
 from lodprt.errors import Interrupted, LodprtError
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model.scene import Scene
-from lodprt.precompute.baker import Baker, layout, load_kernels, material_tables, ray_offset
+from lodprt.precompute.baker import Baker, bake_kernels, layout, material_tables, ray_offset
 from lodprt.store.bake_store import FORMAT_VERSION, sample_group
 from lodprt.store.writer import FORMAT_NAME, StoreWriter
 
@@ -131,7 +131,7 @@ class SampleJob:
         with _WORKER_LOCK:
             if _WORKER.get("token") != self.token:
                 _WORKER.clear()  # one job at a time: the previous bake's device arrays go
-                load = load_kernels(self.device)
+                load = load_kernels(self.device, *bake_kernels())
                 _WORKER.update(token=self.token, state=self.device_state())
             baker, lightcut = _WORKER["state"]
         return self.write(*self.compute(baker, lightcut, k)), load
@@ -222,7 +222,7 @@ def bake(
             return BakeResult(**target.summary())
     try:
         # plan: kernels, the scene and the hierarchy (each skipped when a resumed store has it complete)
-        load_seconds = 0.0 if cluster else load_kernels(device)
+        load_seconds = 0.0 if cluster else load_kernels(device, *bake_kernels())
         t0 = time.perf_counter()
         if target is not None and not target.complete("scene"):
             _write_scene(target.writer, scene, sh_order)

@@ -1,14 +1,13 @@
 """One light sample's work on a Warp device (SPEC 4; thesis 2.2; T-8..T-10): ``Baker`` holds the scene's BVH and
 material tables, casts the shadow rays (visibility), shades Phong radiance and projects it on SH over the view
 direction (T-6, closed-form specular lobe P-6), for every referenced vertex or only on a light cut
-(:mod:`lodprt.precompute.light_cut`); ``load_kernels`` compiles or loads the kernels once. ``lodprt.precompute.bake``
+(:mod:`lodprt.precompute.light_cut`); ``bake_kernels`` names the kernels ``lodprt.devices.load_kernels`` compiles or loads once. ``lodprt.precompute.bake``
 plans the bake and writes the store.
 """
 
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 
@@ -16,18 +15,7 @@ from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.kernels.visibility import BACK_FACING
 from lodprt.model import sh
-from lodprt.model.scene import Scene
-
-#: shadow-ray offset as a fraction of the scene's bounding diagonal
-RAY_OFFSET_FRACTION = 1e-4
-
-
-def ray_offset(scene: Scene) -> float:
-    """Shadow-ray offset in scene units: scales with the scene's size and with float32 resolution of its coordinates."""
-    coord = float(np.abs(scene.bounds).max())
-    # a Python float: numpy's float32 eps would make the product float32, which the store's JSON attributes refuse
-    return max(RAY_OFFSET_FRACTION * scene.diagonal, 64.0 * float(np.finfo(np.float32).eps) * coord)
-
+from lodprt.model.scene import Scene, ray_offset  # noqa: F401  (ray_offset: the bake's, re-exported)
 
 def layout(scene: Scene, sh_order: int) -> tuple[int, int]:
     """(coefficients per vertex, channels) the scene needs: 1 coefficient without specular, 1 channel when grey."""
@@ -55,7 +43,7 @@ class Baker:
 
     ``ids`` (K,) are the vertices to bake (``bake`` passes every referenced vertex). The state is shared read-only
     between threads; each thread gets its own work arrays, so :meth:`sample` and :meth:`visibility` may run on
-    several threads at once. Call :func:`load_kernels` on ``device`` first when threads will launch.
+    several threads at once. Call ``lodprt.devices.load_kernels(device, *bake_kernels())`` first when threads will launch.
     ``ncoef`` and ``channels`` are the layout of the coefficients (:func:`layout`), ``offset`` the ray offset.
     """
 
@@ -185,16 +173,13 @@ class Baker:
         return ids, nodes, dark[nodes].astype(np.uint8), coeffs.numpy().copy(), vis
 
 
-def load_kernels(device: str) -> float:
-    """Compile or load the bake's Warp modules on ``device`` before any thread launches them; returns seconds."""
+def bake_kernels() -> tuple:
+    """The Warp modules a point-light bake launches: ``lodprt.devices.load_kernels(device, *bake_kernels())`` loads
+    them before any thread does."""
+    warp()
+    from lodprt.kernels import gi as kgi
+    from lodprt.kernels import light_cut as kcut
     from lodprt.kernels import shading as kshade
     from lodprt.kernels import visibility as kvis
 
-    wp = warp()
-    t0 = time.perf_counter()
-    from lodprt.kernels import gi as kgi
-    from lodprt.kernels import light_cut as kcut
-
-    for module in (kvis, kshade, kcut, kgi):
-        wp.load_module(module, device=device)
-    return time.perf_counter() - t0
+    return kvis, kshade, kcut, kgi

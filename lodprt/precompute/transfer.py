@@ -14,17 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.devices import launch_ranges, resolve_device, warp
+from lodprt.devices import launch_ranges, load_kernels, resolve_device, warp
 from lodprt.errors import LodprtError
 from lodprt.model import sh
+from lodprt.model.scene import bounds_offset, ray_offset, referenced_bounds
 from lodprt.store.transfer_store import prepare_transfer_destination, write_transfer_store
 
 log = logging.getLogger(__name__)
 
 MODES = ("unshadowed", "shadowed", "interreflected")
 GLOSSY_MODES = {"none": 0, "hemisphere": 1, "shadowed": 2}
-#: ray origin offset as a fraction of the scene diagonal (the same as the point-light bake)
-RAY_OFFSET_FRACTION = 1e-4
 #: most mirror reflections followed per path (C-1, C-2); longer chains are dropped
 MAX_MIRROR = 8
 
@@ -44,20 +43,12 @@ def fibonacci_directions(count: int) -> np.ndarray:
     return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
 
 
-def ray_offset(positions: np.ndarray) -> float:
-    """Ray-origin offset in scene units: scales with the scene's size and the float32 resolution of its coordinates."""
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
-    return max(RAY_OFFSET_FRACTION * float(np.linalg.norm(hi - lo)), 64.0 * float(np.finfo(np.float32).eps) * float(np.abs(positions).max()))
-
-
-def load_kernels(device: str) -> float:
-    """Compile or load ``lodprt.kernels.transfer`` on ``device``; returns seconds."""
-    wp = warp()
+def transfer_kernels() -> tuple:
+    """The Warp modules a transfer bake launches (for ``lodprt.devices.load_kernels``)."""
+    warp()
     from lodprt.kernels import transfer as ktr
 
-    t0 = time.perf_counter()
-    wp.load_module(ktr, device=device)
-    return time.perf_counter() - t0
+    return (ktr,)
 
 
 @dataclasses.dataclass
@@ -89,7 +80,8 @@ class Geometry:
         alb = np.broadcast_to(np.asarray(albedo, np.float64), pos.shape).copy()
         ref = np.zeros(len(pos), bool)
         ref[fc.ravel()] = True
-        off = ray_offset(pos) if offset is None else float(offset)
+        # the point-light bake's offset (lodprt.model.scene.ray_offset), over the referenced vertices
+        off = bounds_offset(referenced_bounds(pos, ref)) if offset is None else float(offset)
         refl = None
         if mirror is not None:
             refl = np.broadcast_to(np.asarray(mirror, np.float64), (len(fc),)).copy()
@@ -103,14 +95,15 @@ class Geometry:
         kd = np.array([m.kd for m in scene.materials], np.float64)[scene.material_id]
         refl = np.array([m.ks if getattr(m, "mirror", False) else 0.0 for m in scene.materials])
         mirror = refl[scene.material_id[scene.faces[:, 0]]] if len(scene.faces) else None
-        g = cls.from_arrays(scene.positions, scene.faces, scene.normals, kd, device=device, mirror=mirror)
+        g = cls.from_arrays(scene.positions, scene.faces, scene.normals, kd, device=device, mirror=mirror,
+                            offset=ray_offset(scene))
         g.referenced = scene.referenced.copy()
         return g
 
     def _warp(self):
         if not hasattr(self, "_wp_cache"):
             wp = warp()
-            load_kernels(self.device)
+            load_kernels(self.device, *transfer_kernels())
             pts = wp.array(self.positions.astype(np.float32), dtype=wp.vec3, device=self.device)
             nrm = wp.array(self.normals.astype(np.float32), dtype=wp.vec3, device=self.device)
             idx = wp.array(self.faces.ravel().astype(np.int32), dtype=wp.int32, device=self.device)
@@ -407,7 +400,7 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     device = resolve_device(device)
     if out is not None:
         prepare_transfer_destination(out, overwrite=overwrite)
-    t_load = load_kernels(device)
+    t_load = load_kernels(device, *transfer_kernels())
     t0 = time.perf_counter()
     geom = Geometry.from_scene(scene, device=device)
     diffuse = diffuse_transfer(geom, order=order, mode=mode, rays=rays, bounces=bounces, threshold=threshold,

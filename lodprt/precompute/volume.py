@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.devices import launch_ranges, resolve_device, warp
+from lodprt.devices import launch_ranges, load_kernels, resolve_device, warp
 from lodprt.errors import LodprtError
 from lodprt.precompute.transfer import fibonacci_directions
 from lodprt.store.volume_store import prepare_volume_destination, write_volume_store
@@ -31,14 +31,12 @@ log = logging.getLogger(__name__)
 STEP_FRACTION = 0.5
 
 
-def load_kernels(device: str) -> float:
-    """Compile or load ``lodprt.kernels.volume`` on ``device``; returns seconds."""
-    wp = warp()
+def volume_kernels() -> tuple:
+    """The Warp modules a volume bake launches (for ``lodprt.devices.load_kernels``)."""
+    warp()
     from lodprt.kernels import volume as kv
 
-    t0 = time.perf_counter()
-    wp.load_module(kv, device=device)
-    return time.perf_counter() - t0
+    return (kv,)
 
 
 class VolumeGrid:
@@ -52,7 +50,7 @@ class VolumeGrid:
         self.step = STEP_FRACTION * h if step is None else float(step)
         if not np.isfinite(self.step) or self.step <= 0:
             raise LodprtError(f"volume step {step!r}: must be a positive number of scene units")
-        load_kernels(self.device)
+        load_kernels(self.device, *volume_kernels())
         self.density = wp.array(volume.density, dtype=wp.float32, device=self.device)
         self.lo = wp.vec3(*volume.lo.astype(np.float32))
         self.hi = wp.vec3(*volume.hi.astype(np.float32))
@@ -199,7 +197,7 @@ def bake_volume(volume, out, *, order: int = 3, rays: int = 128, bounces: int = 
     device = resolve_device(device)
     if out is not None:
         prepare_volume_destination(out, overwrite=overwrite)
-    t_load = load_kernels(device)
+    t_load = load_kernels(device, *volume_kernels())
     grid = VolumeGrid(volume, device=device, step=step)
     res = volume_transfer(grid, order=order, rays=rays, bounces=bounces, threshold=threshold, rotate=rotate,
                           seed=seed, progress=progress, jobs=jobs)

@@ -212,3 +212,12 @@ def scene_centre(store) -> tuple[float, float, float]:
     """Centre of the bounding box of the vertices the faces use (the default look-at point)."""
     p = store.positions[np.unique(store.faces.ravel())]
     return tuple(float(x) for x in 0.5 * (p.min(0) + p.max(0)))
+
+
+def camera_jump(a: Camera, b: Camera, jump: float) -> bool:
+    """More than a small step from camera ``a`` to ``b``: the eye or the target moved by more than ``jump`` of the
+    viewing distance, or the lens, screen or up vector changed."""
+    dist = max(float(np.linalg.norm(np.subtract(a.eye, a.target))), 1e-12)
+    step = max(float(np.linalg.norm(np.subtract(a.eye, b.eye))), float(np.linalg.norm(np.subtract(a.target, b.target))))
+    return step > jump * dist or (a.fov, a.width, a.height, a.up, a.near, a.far) != (b.fov, b.width, b.height, b.up,
+                                                                                     b.near, b.far)

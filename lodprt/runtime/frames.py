@@ -189,7 +189,10 @@ class StoreFrames:
 
 
 def auto_white(radiance) -> float:
-    """The default white point: 99th percentile of the positive entries of ``radiance`` (1 when there are none)."""
+    """The default white point: 99th percentile of the positive entries of ``radiance`` (1 when there are none).
+
+    The one white rule: :func:`lodprt.runtime.samples.default_white` applies it to a whole store (the Runtime's
+    white), the display to one frame's radiance when its source has no white of its own."""
     r = np.asarray(radiance, np.float64)
     pos = r[r > 0]
     return float(np.percentile(pos, 99)) if pos.size else 1.0

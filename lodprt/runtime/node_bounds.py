@@ -53,6 +53,30 @@ def detail_bounds(h, c: np.ndarray, white: float, plan, rings: tuple, levels: li
     return d[V:]
 
 
+def detail_mean_square(h, c: np.ndarray, white: float, plan, levels: list) -> np.ndarray:
+    """E-1 for one light sample's completed coefficients ``c`` (V, C, ncoef): for each internal node, the mean over
+    its leaves of the squared T-15 residual (``radiance_bound`` of C(v) - sum_j w_j C(q_j), the same per-collapse
+    term as ``detail_bounds`` (a)) of the collapses in its subtree, in units of ``white`` squared: (N - V, C)
+    float32. Where ``detail_bounds`` keeps the largest, this keeps the mean, so that a node's E-1 term (mean
+    square times the pixels it covers) estimates rather than bounds the squared error it adds to a frame."""
+    V, N = h.num_vertices, h.num_nodes
+    _, C, n = c.shape
+    if N == V:
+        return np.zeros((0, C), np.float32)
+    c0, c1 = h.children[:, 0], h.children[:, 1]
+    c = c.reshape(V, C * n) / np.float32(white)
+    s = np.zeros((N, C), np.float64)
+    for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
+        rows = slice(start, min(start + CHUNK, N - V))
+        r = max(int(plan.ring_len[rows].max()), 1)
+        interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
+        s[V + rows.start:V + rows.stop] = radiance_bound(c[plan.vertex[rows]] - interp, C, n) ** 2
+    for nodes in levels:
+        s[nodes] += s[c0[nodes]] + s[c1[nodes]]
+    leaves = np.maximum(h.leaf_range[V:, 1] - h.leaf_range[V:, 0], 1)
+    return (s[V:] / leaves[:, None]).astype(np.float32)
+
+
 def leaf_rings(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every original edge in both directions, sorted by its first vertex: (v, q, start of each v's run)."""
     f = faces

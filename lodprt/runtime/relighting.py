@@ -67,6 +67,17 @@ class Relighting:
         slot[self.used_samples] = self.used_slots
         return np.where(self.light_weights > 0, slot[self.light_samples], -1).astype(np.int32)
 
+    def bracket_mask(self) -> np.ndarray:
+        """(slots,) int32: 1 for the cache slots of the samples around each light (``bracketing``), whose S-2
+        detail the direct path's view cut takes at full weight (M-5)."""
+        mask = np.zeros(max(self.samples.slots, 1), np.int32)
+        near = bracketing(self.interp.samples, self.positions, self.light_samples, self.light_weights)
+        slot = np.full(len(self.interp.samples), -1, np.int64)
+        slot[self.used_samples] = self.used_slots
+        chosen = slot[self.light_samples[near]]
+        mask[chosen[chosen >= 0]] = 1
+        return mask
+
     def visibility_array(self):
         """The samples' visibility (V, slots) uint8 on the device, as the cache holds it now."""
         from lodprt.devices import warp
@@ -116,3 +127,18 @@ class Relighting:
             out[ref] = arr.numpy()
         return out
 
+
+def bracketing(samples: np.ndarray, lights: np.ndarray, idx: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(L, k) bool: whether sample ``idx[l, j]`` is the nearest sample with a weight in its octant about light l
+    (octant: the signs of sample - light per axis, 0 counting as +): the samples that surround the light as far as
+    the samples do (on a regular grid, the corners of the light's cell; along an axis of one layer, the layer)."""
+    d = samples[idx] - lights[:, None, :]  # (L, k, 3)
+    octant = ((d < 0) * np.array([1, 2, 4])).sum(2)
+    dist = np.where(weights > 0, np.linalg.norm(d, axis=2), np.inf)
+    out = np.zeros(idx.shape, bool)
+    for o in range(8):
+        here = (octant == o) & np.isfinite(dist)
+        best = np.argmin(np.where(here, dist, np.inf), axis=1)
+        rows = np.flatnonzero(here.any(1))
+        out[rows, best[rows]] = True
+    return out

@@ -150,7 +150,11 @@ class SampleCache:
 def default_white(store) -> float:
     """The radiance shown as white by default: the 99th percentile over every sample's baked vertices of the
     view-averaged radiance (y_0 term, brightest channel, the bake's intensity), read one sample at a time from the
-    store (the stored rows only: no completion, memory for one sample)."""
+    store (the stored rows only: no completion, memory for one sample). The same rule as
+    :func:`lodprt.runtime.frames.auto_white` (which it calls), applied to the whole store rather than one frame: the
+    Runtime's fixed white, so that frames do not change brightness as the light moves."""
+    from lodprt.runtime.frames import auto_white
+
     y0 = sh.basis(np.array([0.0, 0.0, 1.0]), 1)[0]
     scale = float(np.max(store.intensity)) * y0
     parts = []
@@ -158,5 +162,4 @@ def default_white(store) -> float:
         _, c = store.sample(k)
         dc = np.abs(np.asarray(c, np.float32)[:, :, 0]).max(1) * scale
         parts.append(dc[dc > 0])
-    pos = np.concatenate(parts) if parts else np.zeros(0)
-    return float(np.percentile(pos, 99)) if pos.size else 1.0
+    return auto_white(np.concatenate(parts) if parts else np.zeros(0))

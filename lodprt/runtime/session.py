@@ -24,8 +24,9 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.runtime import node_bounds
-from lodprt.runtime.camera import Camera, camera_for, clip_planes, scene_centre, view_projection
-from lodprt.runtime.frames import Frame, StoreFrames
+from lodprt.runtime import frame_error
+from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
+from lodprt.runtime.frames import Frame
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
 from lodprt.runtime.samples import default_white
@@ -51,6 +52,10 @@ LIGHT_JUMP = 0.4
 HYSTERESIS = 1.25
 #: a failed collapse of a node with more original edges under it than this backs off for a few frames
 BACKOFF_EDGES = 20_000
+#: E-4: steering rounds of the first frame with a target_psnr (each converges the cut for the new bound)
+FIRST_ROUNDS = 12
+#: E-4: the relative change of the bound below which the steering keeps it
+STEER_STEP = 0.1
 #: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
 CRITERIA = ("screen", "thesis")
 #: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
@@ -85,8 +90,7 @@ class Runtime:
     covers (above AREA_SHARE of the screen by the square root of its area), and its geometric error in pixels at
     ``pixel_tolerance`` per default bound, each against the bound) or "thesis" (T-14: ``alpha e_geo + (1 - alpha)
     e_lumi``); error_bound: refine above, coarsen at or below bound / HYSTERESIS (None: the criterion's default,
-    DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs
-    e_geo against e_lumi (T-14 only);
+    DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs e_geo against e_lumi;
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
@@ -96,6 +100,8 @@ class Runtime:
     fewer than one frame's samples): a sample is completed (T-15) when the lights first give it a weight
     (``lodprt.runtime.samples.SampleCache``);
     progress(done, total): called as the light samples a frame needs are completed;
+    target_psnr: with the screen criterion, steer the bound toward this estimated PSNR of the frame against the
+    full mesh (E-1..E-4, ``lodprt.runtime.frame_error``; ``error_bound`` is then the starting bound);
     interpolation: how a light between samples is lit (``lodprt.runtime.direct_light.INTERPOLATIONS``): "direct"
     (default: the light's direct Phong radiance in closed form times a shadow ray's visibility, plus the samples'
     interpolated residual, M-1, M-2), "direct-agree" (rays only where the samples disagree, M-3), "direct-blend"
@@ -106,7 +112,7 @@ class Runtime:
                  pixel_tolerance: float = PIXEL_TOLERANCE, triangle_budget: int | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 1,
                  lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None,
-                 interpolation: str = DEFAULT_INTERPOLATION):
+                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr: float | None = None):
         from lodprt.devices import resolve_device
 
         if criterion not in CRITERIA:
@@ -116,6 +122,11 @@ class Runtime:
         if not p > 0 or not math.isfinite(p):
             raise LodprtError(f"pixel_tolerance {pixel_tolerance}: must be a positive number of pixels")
         self.pixel_tolerance = p
+        self.target_psnr = frame_error.check_target(target_psnr)
+        if self.target_psnr is not None and (criterion != "screen" or triangle_budget is not None):
+            raise LodprtError("target_psnr steers the screen criterion's bound: not with criterion 'thesis' or a "
+                              "triangle_budget")
+        self.estimated_psnr = None  # E-3 of the last estimate (target_psnr set)
         if error_bound is None:
             error_bound = DEFAULT_ERROR_BOUND[criterion]
         self.device = resolve_device(device)
@@ -325,37 +336,28 @@ class Runtime:
 
     def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
                    near=None, far=None, *, eye=None) -> Camera:
-        """A ``Camera`` or its fields: ``set_camera(eye, target, ...)`` or ``set_camera(eye=..., target=...)``;
-        ``target`` defaults to the scene's centre (``lodprt.runtime.camera.scene_centre``, as the command line)."""
+        """A ``Camera`` or its fields (the eye positional or ``eye=``); ``target`` None: the scene's centre, as the CLI."""
         old = self.camera
         if self._centre is None and target is None and not isinstance(camera, Camera):
             self._centre = scene_centre(self.store)
         self.camera = camera_for(camera, eye=eye, target=target, default_target=self._centre, up=up, fov=fov,
                                  width=width, height=height, near=near, far=far)
         self._dirty = True
-        if old is None or self._camera_jump(old, self.camera):
+        if old is None or camera_jump(old, self.camera, JUMP):
             self._refresh_all = True
         self.vp = view_projection(self.camera, self.bounds)
         self.planes = clip_planes(self.vp)
         return self.camera
 
-    @staticmethod
-    def _camera_jump(a: Camera, b: Camera) -> bool:
-        """More than a small step from camera ``a`` to ``b``: the eye or the target moved by more than JUMP of the
-        viewing distance, or the lens, screen or up vector changed."""
-        dist = max(float(np.linalg.norm(np.subtract(a.eye, a.target))), 1e-12)
-        step = max(float(np.linalg.norm(np.subtract(a.eye, b.eye))), float(np.linalg.norm(np.subtract(a.target, b.target))))
-        return step > JUMP * dist or (a.fov, a.width, a.height, a.up, a.near, a.far) != (b.fov, b.width, b.height, b.up,
-                                                                                           b.near, b.far)
-
     # -- errors ------------------------------------------------------------------------------------------------
-    def node_errors(self, nodes, *, exact: bool = True) -> NodeErrors:
+    def node_errors(self, nodes, *, exact: bool = True, detail_only: bool = False) -> NodeErrors:
         """For internal ``nodes`` (K,), a ``NodeErrors``: culled (T-13 back-facing or outside the frustum), the
         criterion's error (S-1 or T-14), e_geo, e_lumi, footprint, e_detail (all 0 where culled: a culled node is
         coarsened whatever its error); float32 Warp kernel
         (``lodprt.kernels.runtime.view_errors``) on the Runtime's device. ``exact=False`` (the frame loop) stops a
         node's evaluation once its refine/coarsen decision is known: its error is then an upper bound when at or
-        under the bound, and e_lumi / e_detail read -1 where they were not needed."""
+        under the bound, and e_lumi / e_detail read -1 where they were not needed; ``detail_only`` evaluates S-1 and
+        S-2 in full but not T-14's e_lumi (the frame estimate, E-1)."""
         from lodprt.kernels import runtime as kr
 
         if self.camera is None:
@@ -374,7 +376,9 @@ class Runtime:
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
-                *bounds, CRITERIA.index(self.criterion), int(self.interpolation != "thesis"), int(bool(exact)),
+                *bounds, CRITERIA.index(self.criterion), int(self.interpolation != "thesis"),
+                wp.array(self.lighting.bracket_mask(), dtype=wp.int32, device=dev),
+                2 if detail_only else int(bool(exact)),
                 float(self.error_bound), float(HYSTERESIS), self.geo_rate(), self.area_ref(), self.alpha,
                 wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
@@ -382,8 +386,10 @@ class Runtime:
         return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))
 
     def geo_rate(self) -> float:
-        """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance)."""
-        return DEFAULT_ERROR_BOUND["screen"] / self.pixel_tolerance
+        """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance; with a
+        target_psnr the steered bound's, so that the geometric error stays at pixel_tolerance pixels)."""
+        bound = self.error_bound if self.target_psnr is not None else DEFAULT_ERROR_BOUND["screen"]
+        return max(bound, 1e-12) / self.pixel_tolerance
 
     def area_ref(self) -> float:
         """S-1: the pixels a node may cover before its shading term grows (AREA_SHARE of the screen)."""
@@ -457,12 +463,9 @@ class Runtime:
             touched += max(n - len(split), 0)
         return refined, coarsened, touched
 
-    def update(self, *, max_passes: int | None = None) -> Frame:
-        """Move the cut for the current camera and lights, triangulate it, relight it: a ``Frame``."""
-        if self.camera is None:
-            raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
-        t0 = time.perf_counter()
-        self._frame += 1
+    def _converge(self, max_passes: int | None) -> tuple[int, int, int, int]:
+        """Refinement passes until the cut settles or ``max_passes`` (default: max_passes after the first frame,
+        all it takes before): (refined, coarsened, nodes touched, passes)."""
         refined = coarsened = touched = passes = 0
         if self.lod and (self._dirty or not self._settled):  # nothing changed since a settled cut: keep it
             limit = max_passes if max_passes is not None else (self.max_passes if self._converged_once else 10_000)
@@ -477,27 +480,55 @@ class Runtime:
             self._converged_once = True
             self._refresh_all = False
         self._dirty = False
-        t1 = time.perf_counter()
+        return refined, coarsened, touched, passes
+
+    def _cut_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut."""
         h = self.h
-        nodes = self.cut.nodes
-        vid = np.sort(h.vertex[nodes]).astype(np.int32)  # ascending: gathers walk memory forward
+        vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
         vid = vid[self.store.referenced[vid]]  # a vertex no face uses is never drawn: not relit
         lut = np.full(h.num_vertices, -1, np.int32)
         lut[vid] = np.arange(len(vid), dtype=np.int32)
-        tri = np.take(lut, self._tri.faces(self.cut.anc))
+        return vid, np.take(lut, self._tri.faces(self.cut.anc))
+
+    def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray) -> None:
+        """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr, E-4: the bound for the next
+        frames, changed when it moves by more than STEER_STEP (the cached errors stay: a node cached under the old
+        bound is evaluated again when due)."""
+        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri)
+        if new is not None and abs(new - self.error_bound) > STEER_STEP * self.error_bound:
+            self.error_bound, self._dirty = new, True
+
+    def update(self, *, max_passes: int | None = None) -> Frame:
+        """Move the cut for the current camera and lights, triangulate it, relight it: a ``Frame``."""
+        if self.camera is None:
+            raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
+        t0 = time.perf_counter()
+        self._frame += 1
+        first, jump = not self._converged_once, self._refresh_all
+        refined, coarsened, touched, passes = self._converge(max_passes)
+        t1 = time.perf_counter()
+        vid, tri = self._cut_mesh()
         t2 = time.perf_counter()
+        due = first or jump or self._frame % REFRESH_FRAMES == 0  # E-4 every few frames and after a jump
+        if self.lod and self.target_psnr is not None and due:  # E-4: steer the bound; the first frame until it holds
+            for _ in range(FIRST_ROUNDS if first else 1):
+                self.estimate_frame_error(vid, tri)
+                if not first or not self._dirty:
+                    break
+                more = self._converge(10_000)
+                refined, coarsened, touched, passes = (a + b for a, b in zip((refined, coarsened, touched, passes),
+                                                                             more))
+                vid, tri = self._cut_mesh()
+        steer = time.perf_counter() - t2  # the estimate and steering count as cut work
         coef, rad = self._relight(vid)
         t3 = time.perf_counter()
         if self.triangle_budget is not None:  # steer the bound toward the budget
-            if len(tri) > self.triangle_budget:
-                self.error_bound = max(self.error_bound, 1e-4) * 1.25
-                self._dirty = True
-            elif len(tri) < 0.8 * self.triangle_budget:
-                self.error_bound /= 1.1
-                self._dirty = True
+            new = frame_error.toward_budget(self.error_bound, len(tri), self.triangle_budget)
+            self.error_bound, self._dirty = new, self._dirty or new != self.error_bound
         stats = {
             "triangles": int(len(tri)),
-            "active_nodes": int(len(nodes)),
+            "active_nodes": int(len(self.cut.nodes)),
             "vertices": int(len(vid)),
             "nodes_touched": int(touched),
             "refined": int(refined),
@@ -506,10 +537,11 @@ class Runtime:
             "error_bound": float(self.error_bound),
             "alpha": float(self.alpha),
             "lights_clamped": int(self.lights_clamped),
-            "shadow_rays": int(self.lighting.rays),  # M-3: rays cast where the samples disagree
-            "ms_cut": 1e3 * (t1 - t0),
+            "shadow_rays": int(self.lighting.rays),  # M-3: rays cast toward the lights
+            "estimated_psnr_db": self.estimated_psnr,  # E-3 (None without a target_psnr)
+            "ms_cut": 1e3 * (t1 - t0 + steer),
             "ms_triangulate": 1e3 * (t2 - t1),
-            "ms_relight": 1e3 * (t3 - t2),
+            "ms_relight": 1e3 * (t3 - t2 - steer),
             "ms_total": 1e3 * (t3 - t0),
         }
         return Frame(vertex_ids=vid, positions=np.take(self._pos32, vid, axis=0),
@@ -566,16 +598,3 @@ class Runtime:
         if len(bad):
             raise LodprtError(f"the view cut violates {len(bad)} dependencies, e.g. nodes {bad[0].tolist()}")
 
-
-def frame_source(store, *, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, outside: str = "clamp"):
-    """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut; ``lod``
-    False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution); both
-    light a light between samples by ``interpolation`` (``lodprt.runtime.direct_light.INTERPOLATIONS``) and treat
-    a light outside the light box by ``outside`` ("clamp" with one warning per source, or "error")."""
-    if store.has_hierarchy:
-        return Runtime(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                       interpolation=interpolation, outside=outside)
-    if lod:
-        log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
-    return StoreFrames(store, interpolation=interpolation, outside=outside)

@@ -71,6 +71,7 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
     lo = np.zeros((len(nodes), 3))
     det = np.zeros((len(nodes), 3))
     det_max, total = np.zeros((len(nodes), 3)), np.zeros(3)
+    near = rt.lighting.bracket_mask()  # M-5: the samples around the light
     internal = nodes - rt.h.num_vertices
     detail = rt.detail
     for j, slot in zip(rt.used_samples, rt.used_slots):  # each sample in use and the cache slot holding it
@@ -80,7 +81,8 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
         hi += (mid + rad) * w
         lo += (mid - rad) * w
         det += detail[internal, slot].astype(np.float64) * np.abs(w)  # S-2: (K, C) bounds toward any direction
-        det_max = np.maximum(det_max, detail[internal, slot].astype(np.float64) * np.ones_like(w))
+        if near[slot]:
+            det_max = np.maximum(det_max, detail[internal, slot].astype(np.float64) * np.ones_like(w))
         total = total + np.abs(w[0])
     if rt.interpolation != "thesis":  # M-5: each sample's detail at full weight (hard shadows between samples)
         det = det_max * total[None, :]

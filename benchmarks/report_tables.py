@@ -1,0 +1,293 @@
+"""One renderer per generated Markdown table: a results dict (``benchmarks/results/<name>.json``) -> a Markdown table.
+
+``TABLES`` maps a marker name (``<!-- report:NAME -->`` in README.md or docs/*.md) to the results file it quotes and
+its renderer. A renderer reads only its results dict: the table is what the JSON says, nothing typed by hand.
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def md(headers: list[str], rows: list[list]) -> str:
+    """A Markdown table (cells already formatted)."""
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def n(x) -> str:
+    """An integer with thousands separators (rounded)."""
+    return f"{round(x):,}"
+
+
+def f(x, digits: int = 1) -> str:
+    return f"{x:,.{digits}f}"
+
+
+def g(x, sig: int = 3) -> str:
+    """``sig`` significant digits, no exponent for ordinary sizes."""
+    if x == 0:
+        return "0"
+    digits = max(0, sig - 1 - math.floor(math.log10(abs(x))))
+    return f"{x:,.{digits}f}"
+
+
+def pct(x, digits: int = 1) -> str:
+    return f"{100 * x:.{digits}f}%"
+
+
+def e4(x) -> str:
+    """An error to 4 decimals; under 0.00005 it reads 0 (the rounding noise of an exact match)."""
+    return "0" if abs(x) < 5e-5 else f"{x:.4f}"
+
+
+def sci(x) -> str:
+    """Two significant digits in exponent form: 1.7e-2."""
+    mantissa, exponent = f"{x:.1e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def ratio(x) -> str:
+    return f"{x:.2f}x"
+
+
+def render(r: dict) -> str:
+    rows = [[row["size"].replace("x", " x "), row["mode"], row["shading"], n(row["triangles"]), f(row["update_ms"]),
+             f(row["draw_ms"]), f(row["fps"])] for row in r["rows"]]
+    return md(["size", "mode", "radiance per", "triangles", "update ms", "draw ms", "frames/s"], rows)
+
+
+def _scene_label(scene: str, floor) -> str:
+    return f"{'bunny' if scene == 'stanford-bunny' else scene} + {floor}"
+
+
+def view_cut_static(r: dict) -> str:
+    views = {}
+    for v in r["static_views"]:
+        views.setdefault((v["scene"], v["view"]), {})[v["criterion"].split()[0]] = v
+    rows = []
+    for (scene, view), by in views.items():
+        s, t = by["screen"], by["thesis"]
+        rows.append([_scene_label(scene, r["floor"]), view, f"{n(s['triangles'])} / {n(s['full'])}",
+                     g(s["fewer"], 2), f"{s['psnr_db']:.1f} dB", n(t["triangles"]), f"{t['psnr_db']:.1f} dB"])
+    return md(["scene", "view", "screen 0.8: triangles / full", "x fewer", "PSNR", "thesis 0.25: triangles", "PSNR"],
+              rows)
+
+
+def view_cut(r: dict) -> str:
+    full = {row["scene"]: row for row in r["rows"] if row["criterion"] == "full mesh"}
+    rows, shown = [], set()
+    for row in r["rows"]:
+        if row["criterion"] == "full mesh":
+            continue
+        scene, first = row["scene"], row["scene"] not in shown
+        shown.add(scene)
+        tri = n(row["median_triangles"]) + (f" / {n(full[scene]['median_triangles'])}" if first else "")
+        ms = f(row["median_ms"]) + (f" ({f(full[scene]['median_ms'])})" if first else "")
+        rows.append([_scene_label(scene, r["floor"]), f"{row['criterion']} {row['error_bound']:g}", tri, ms,
+                     ratio(row["speedup"]), f"{row['median_psnr_db']:.1f} dB"])
+    return md(["scene", "criterion, bound", "triangles / full", "median ms (full mesh)", "vs full", "median PSNR"],
+              rows)
+
+
+def runtime(r: dict) -> str:
+    rows = []
+    for p in r["paths"]:
+        full = p["mode"] == "full mesh"
+        rows.append([p["path"], p["mode"], n(p["median_triangles"]), "0" if full else f(p["median_ms_cut"]),
+                     f(p["median_ms_triangulate"]), f(p["median_ms_relight"]), f(p["median_ms_total"]),
+                     f(p["p95_ms_total"]), "1" if full else f"{p['speedup']:.1f}x"])
+    return md(["path", "mode", "triangles", "cut ms", "triangulation ms", "relight ms", "median ms", "p95 ms",
+               "vs full"], rows)
+
+
+def runtime_sweep(r: dict) -> str:
+    rows = [[f"{s['error_bound']:g}", n(s["median_triangles"]), n(s["thesis_triangles"]), f(s["median_ms"]),
+             f"{s['rel_rmse']:.3f}"] for s in r["sweep"]]
+    return md(["error bound", "triangles", "thesis figures 21-24", "median ms", "image rRMSE"], rows)
+
+
+def light_spacing(r: dict) -> str:
+    rows = [[row["grid"], n(row["samples"]), f"{row['spacing']:.3f}", f(row["bake_s"], 2), f(row["mib"]),
+             pct(row["rmse_between"], 0), pct(row["rmse_between_t12"], 0), pct(row["rmse_on_samples"]),
+             pct(row["rmse_edges"], 0)] for row in r["rows"]]
+    return md(["grid", "samples", "spacing", "bake s", "MiB", "between samples", "between, T-12 as printed",
+               "on samples", "shadow edges"], rows)
+
+
+def hierarchy(r: dict) -> str:
+    label = {"rounds": "`rounds`", "pymeshlab": "`pymeshlab` (2 worker processes)",
+             "pymeshlab-1p": "`pymeshlab` (`workers=1`, in process)", "QEM only": "pymeshlab alone, to the same base"}
+    rows = []
+    for row in r["rows"]:
+        mem = ""
+        if "bytes_per_vertex" in row:
+            mem = n(row["bytes_per_vertex"]) + (f" (+ {n(row['worker_mib'])} MiB per worker)"
+                                                 if row.get("worker_mib") else "")
+        view = (f"{n(row['view_triangles'])} triangles, {row['psnr_db']:.1f} dB" if "view_triangles" in row else "")
+        rows.append([row["mesh"].replace("x", " x "), label.get(row["method"], row["method"]), f(row["build_s"], 2),
+                     mem, n(row["roots"]) if "roots" in row else "", row.get("depth", ""),
+                     n(row["light_cut_vertices"]) if "light_cut_vertices" in row else "", view])
+    return md(["mesh", "build", "build s", "peak B/vertex", "roots", "depth", "5-degree light cut (vertices)",
+               "view cut at the default bound, one view"], rows)
+
+
+def scale_hierarchy(r: dict) -> str:
+    rows = [[row["floor"], n(row["vertices"]), f(row["hierarchy_s"]), f(row["pymeshlab_s"]), f(row["ratio"], 2),
+             n(row["hierarchy_b_per_v"]), n(row["pymeshlab_b_per_v"]), n(row["roots"]), row["depth"], row["rounds"]]
+            for row in r["vertex_rows"]]
+    return md(["floor", "vertices", "hierarchy s", "halving s", "x halving", "build B/vertex", "halving B/vertex",
+               "roots", "depth", "rounds"], rows)
+
+
+def scale_bake(r: dict) -> str:
+    rows = [[row["floor"], n(row["vertices"]), f(row["bake_s"]), f(row["bake_hierarchy_s"]), n(row["bake_peak_mib"]),
+             n(row["bake_b_per_v"])] for row in r["vertex_rows"]]
+    return md(["floor", "vertices", "bake s", "of which hierarchy s", "peak MiB", "bytes per vertex"], rows)
+
+
+def scale_samples(r: dict) -> str:
+    rows = [[row["grid"], row["samples"], f(row["bake_s"]), n(row["bake_peak_mib"]), f(row["store_mib"])]
+            for row in r["sample_rows"]]
+    return md(["grid", "samples", "bake s", "peak MiB", "store MiB"], rows)
+
+
+def scale_runtime(r: dict) -> str:
+    both = [row for row in r["sample_rows"]] + [row for row in r["vertex_rows"] if row["floor"] != 200]
+    rows = [[row["floor"], row["samples"], f(row["open_s"]), f(row["first_frame_s"]), n(row["runtime_mib"]),
+             row["runtime_completed"]] for row in both if "open_s" in row]
+    return md(["floor", "samples", "open s", "first frame s", "run-time MiB", "samples completed"], rows)
+
+
+def scale_workers(r: dict) -> str:
+    rows = [[row["mode"] if row["mode"] == "in-process" else f"`{row['mode']}`", f(row["bake_s"]),
+             n(row["client_peak_mib"])] for row in r["worker_rows"]]
+    return md(["bake", "seconds (command, cluster start included)", "client peak MiB"], rows)
+
+
+def gi(r: dict) -> str:
+    rows = [[row["bounces"], row["rays"] if row["bounces"] else "-", g(row["full_s"]), g(row["lod_s"]),
+             g(row["ratio"]), n(row["gathered"]), e4(row["full_err"]), e4(row["lod_err"]), e4(row["lod_vs_full"])]
+            for row in r["rows"]]
+    return md(["bounces", "rays", "full s", "LOD s", "LOD / full", "gathered vertices", "full err", "LOD err",
+               "LOD vs full"], rows)
+
+
+def gi_mitsuba(r: dict) -> str:
+    m = r["mitsuba"]
+    names = {"direct": "direct only", "gi_full": "2 bounces, 128 rays, full resolution",
+             "gi_lod": "2 bounces, 128 rays, LOD"}
+    rows = [[label, f"{m[k + '_psnr']:.2f} dB", f"{m[k + '_psnr_foreground']:.1f} dB",
+             f"{100 * m[k + '_shadow_mean_rel']:.3g}%"] for k, label in names.items()]
+    return md(["lodprt", "PSNR", "PSNR, object pixels",
+               f"mean radiance in the direct shadows ({n(m['shadow_pixels'])} px) vs Mitsuba"], rows)
+
+
+def volume(r: dict) -> str:
+    names = {0: "shadowed: us/voxel, error", 1: "+ 1 scattering pass", 2: "+ 2 scattering passes"}
+    rays = sorted({t["rays"] for t in r["transfer"]})
+    cells = {(t["bounces"], t["rays"]): f"{n(t['us_per_voxel'])}, {sci(t['error_vs_ref'])}" for t in r["transfer"]}
+    bounces = sorted({t["bounces"] for t in r["transfer"]})
+    rows = [[names.get(b, f"+ {b} passes")] + [cells.get((b, k), "") for k in rays] for b in bounces]
+    return md(["passes"] + [f"{k} rays" for k in rays], rows)
+
+
+def neighbourhood(r: dict) -> str:
+    rows = [[f"{row['grid']}^3" + (" + reflection" if row["reflection"] else ""), f(row["grid_s"], 2), f(row["mib"]),
+             pct(row["rms_error"]), pct(row["max_error"], 0), g(row["grid_ms"]), g(row["receiver_ms"])]
+            for row in r["rows"]]
+    return md(["grid", "matrices s", "MiB", "RMS error", "worst error", "N-3 ms", "N-4, N-5 ms"], rows)
+
+
+def environment_transfer(r: dict) -> str:
+    rows = [[row["mode"], row["bounces"], row["rays"], f(row["warp_us_per_vertex"]), f"{row['error_vs_ref']:.4f}",
+             f(row["numpy_embree_s"], 2), f(row["warp_s"], 2), f(row["ratio"], 2)] for row in r["transfer"]]
+    return md(["mode", "bounces", "rays", "us/vertex", f"error vs {r['reference_rays']} rays", "numpy + Embree s",
+               "Warp s", "numpy / Warp"], rows)
+
+
+def environment_lod(r: dict) -> str:
+    rows = [[f"{row['threshold']:g}", n(row["vertices_kept"]), pct(row["fraction"]), n(row["kib"]),
+             f(row["cut_s"], 2), f(row["complete_s"], 2), pct(row["relit_error"], 2)] for row in r["lod"]]
+    return md(["threshold", "vertices kept", "of all", "KiB", "cut s", "completion s", "relit error"], rows)
+
+
+def table1(r: dict) -> str:
+    rows = [[row["threshold"], n(row["vertices"]), f(row["reduction"]), n(row["kib"]), n(row["thesis_vertices"]),
+             n(row["thesis_kib"]), f(row["bake_s"], 2), e4(row["rmse_all"]), f"{row['max_all']:.3f}",
+             e4(row["exact_rmse"]), f"{row['boundary']:.3f}"] for row in r["rows"]]
+    return md(["threshold (degrees)", "mean vertices", "reduction", "KiB/sample", "thesis vertices", "thesis KB",
+               "bake s", "rRMSE vs full", "rMax vs full", "rRMSE vs exact", "rRMSE shadow edges"], rows)
+
+
+def bake(r: dict) -> str:
+    rows = [[row["bake"], f(row["seconds"], 2), f(row["per_sample_ms"]), n(row["per_vertex_ns"]),
+             f(row["speedup_vs_numpy"], 2), n(row["kib_per_sample"])] for row in r["rows"]]
+    return md(["bake", "seconds", "ms per sample", "ns per vertex and sample", "x numpy + Embree", "KiB per sample"],
+              rows)
+
+
+def visibility(r: dict) -> str:
+    s = r["summary"]
+    rows = [["Warp any-hit, 1 thread", n(s["rays"]), f(s["warp_mrays_per_s"], 2), f(s["warp_bvh_build_s"], 2)],
+            [f"Warp any-hit, {s['warp_threads']} threads", n(s["rays"]), f(s["warp_threaded_mrays_per_s"], 2), ""],
+            ["Embree", n(s["rays"]), f(s["embree_mrays_per_s"], 2), f(s["embree_build_s"], 2)]]
+    table = md(["shadow rays", "rays", "Mrays/s", "build s"], rows)
+    return table + f"\n\nLargest disagreement between the two per sample: {pct(s['max_disagreement'], 3)} of the rays."
+
+
+def compression(r: dict) -> str:
+    def err(x):
+        return "-" if x != x else f"{x:.4f}"
+
+    rows = [[f"`{row['codec']}`", n(row["payload_kib"]), n(row["disk_kib"]), f(row["ratio_disk"], 2),
+             err(row["rel_rmse_store"]), err(row["rel_rmse_exact"]), f(row["seconds"], 1)] for row in r["rows"]]
+    return md(["codec", "payload KiB/sample", "on disk KiB/sample", "x smaller on disk (vs cut)",
+               "rRMSE vs cut store", "rRMSE vs exact", "encode s"], rows)
+
+
+def moving_lights(r: dict) -> str:
+    rows = [[f"{row['scene']} + {r['floor']} floor", f"`{row['method']}`",
+             f"{pct(row['rrmse'], 2)} ({pct(row['rrmse_worst'], 2)})", pct(row["rrmse_on_samples"], 2),
+             pct(row["off5"]), f(row["psnr_db"]), f"{f(row['ms'])} ({f(row['p95_ms'])})", f(row["ms_ratio"], 2)]
+            for row in r["rows"] if row["grid"] == "3x1x3"]
+    return md(["scene", "interpolation", "rRMSE between (median, worst light)", "on samples", "> 5% off", "PSNR dB",
+               "ms/frame (p95)", "x thesis"], rows)
+
+
+def moving_lights_mitsuba(r: dict) -> str:
+    m = r["mitsuba"]
+    methods = sorted({k.split("/")[1] for k in m if "/" in k}, key=lambda x: ("direct", "direct-agree",
+                                                                                "direct-blend", "thesis").index(x))
+    rows = [[f"light {case}"] + [f(m[f"{case}/{meth}"]) for meth in methods] for case in m["lights"]]
+    return md(["bunny + {} floor, diffuse, full store".format(m["floor"])] + [f"`{x}` dB" for x in methods], rows)
+
+
+#: marker name -> (results file stem in benchmarks/results, renderer)
+TABLES = {
+    "render": ("render", render),
+    "view_cut_static": ("view_cut", view_cut_static),
+    "view_cut": ("view_cut", view_cut),
+    "runtime": ("runtime", runtime),
+    "runtime_sweep": ("runtime", runtime_sweep),
+    "light_spacing": ("light_spacing", light_spacing),
+    "hierarchy": ("hierarchy", hierarchy),
+    "scale_hierarchy": ("scale", scale_hierarchy),
+    "scale_bake": ("scale", scale_bake),
+    "scale_samples": ("scale", scale_samples),
+    "scale_runtime": ("scale", scale_runtime),
+    "scale_workers": ("scale", scale_workers),
+    "gi": ("gi", gi),
+    "gi_mitsuba": ("gi", gi_mitsuba),
+    "volume": ("volume", volume),
+    "neighbourhood": ("neighbourhood", neighbourhood),
+    "environment_transfer": ("environment", environment_transfer),
+    "environment_lod": ("environment", environment_lod),
+    "table1": ("table1", table1),
+    "bake": ("bake", bake),
+    "visibility": ("visibility", visibility),
+    "compression": ("compression", compression),
+    "moving_lights": ("moving_lights", moving_lights),
+    "moving_lights_mitsuba": ("moving_lights", moving_lights_mitsuba),
+}

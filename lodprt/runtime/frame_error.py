@@ -1,0 +1,162 @@
+"""The view cut's error for the whole frame (docs/RUNTIME.md "An error target for the frame"; E-1..E-4): an
+estimate of the frame's mean squared error against the full mesh from the per-node S-2 bounds, and the steering of
+the per-node bound toward a stated PSNR.
+
+    E-1   SSE = sum over the cut's coarse nodes in view of m min(pi r_px^2, W H), m the mean over the node's leaves
+          of the squared T-15 residual of its subtree's collapses (units of white squared; the samples' values
+          combined as S-2's bounds are, M-5)
+    E-2   N   = the pixels the cut's front-facing triangles cover (projected areas, at most W H)
+    E-3   PSNR_est = -10 log10(SSE / N)                         (display units of white, as ``frame_error``)
+    E-4   the bound b for the next frames: the largest S-1 error e such that the coarse nodes at or under e add
+          at most 10^(-PSNR / 10) N to E-1 (the rest are refined), raised by RAISE when E-1 is under
+          SLACK of the budget (room to coarsen); never by more than MAX_STEP at once
+
+A coarse node's subtree loses what T-15 cannot rebuild from coarser vertices; the mean of that residual's square
+over its leaves, spread over the pixels the node covers, estimates the squared error the node adds (the S-2 bound,
+the largest residual, would bound it, but spreads one edge's step over a whole node and overestimates by orders of
+magnitude). The geometric error is held to ``pixel_tolerance`` pixels apart, and E-2 counts twice the pixels where
+front faces overlap. ``benchmarks/view_cut.py`` compares E-3 with the measured PSNR.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+
+from lodprt.errors import LodprtError
+
+#: E-4: raise the bound by this factor when the estimate is under SLACK of the budget; steps at most MAX_STEP
+RAISE = 1.15
+SLACK = 0.6
+MAX_STEP = 4.0
+#: the lowest and highest bounds the steering may reach (units of white)
+BOUND_RANGE = (1e-4, 8.0)
+
+
+def check_target(psnr) -> float | None:
+    """``psnr`` as a float in (0, 200] dB, or None; LodprtError naming the field otherwise."""
+    if psnr is None:
+        return None
+    p = float(psnr)
+    if not math.isfinite(p) or not 0 < p <= 200:
+        raise LodprtError(f"target_psnr {psnr}: must be a PSNR in dB in (0, 200]")
+    return p
+
+
+def covered_pixels(positions: np.ndarray, triangles: np.ndarray, vp: np.ndarray, eye, width: int,
+                   height: int) -> float:
+    """E-2: the screen area in pixels of the triangles (indices into ``positions``) that face ``eye`` and lie in
+    front of it, projected by ``vp`` (projection @ view), summed and capped at the screen's."""
+    if not len(triangles):
+        return 0.0
+    p = np.asarray(positions, np.float64)
+    t = np.asarray(triangles, np.int64)
+    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+    front = (np.cross(b - a, c - a) * (np.asarray(eye, np.float64) - a)).sum(1) > 0
+    clip = np.c_[p, np.ones(len(p))] @ np.asarray(vp, np.float64).T
+    w = clip[:, 3]
+    ok = front & (w[t] > 1e-9).all(1)
+    xy = clip[:, :2] / np.where(w > 1e-9, w, 1.0)[:, None] * (0.5 * np.array([width, height]))
+    u, v, s = xy[t[ok, 0]], xy[t[ok, 1]], xy[t[ok, 2]]
+    area = 0.5 * np.abs((v[:, 0] - u[:, 0]) * (s[:, 1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (s[:, 0] - u[:, 0]))
+    return float(min(area.sum(), width * height))
+
+
+def psnr(sse: float, covered: float) -> float:
+    """E-3 (inf when the estimate is 0)."""
+    if sse <= 0 or covered <= 0:
+        return float("inf")
+    return float(-10.0 * math.log10(min(sse / covered, 1.0)))
+
+
+def steer(bound: float, target_psnr: float, err: np.ndarray, sse: np.ndarray, covered: float) -> float:
+    """E-4: the bound for the next frames from the coarse nodes' S-1 errors ``err`` and E-1 terms ``sse``."""
+    budget = 10.0 ** (-target_psnr / 10.0) * max(covered, 1.0)
+    total = float(sse.sum())
+    if total > budget:
+        order = np.argsort(err, kind="stable")
+        keep = np.cumsum(sse[order]) <= budget
+        new = float(err[order][keep][-1]) if keep.any() else bound / MAX_STEP
+    elif total < SLACK * budget:
+        new = bound * RAISE
+    else:
+        new = bound
+    new = min(max(new, bound / MAX_STEP), bound * MAX_STEP)
+    return float(min(max(new, BOUND_RANGE[0]), BOUND_RANGE[1]))
+
+
+def estimate(rt, positions: np.ndarray, triangles: np.ndarray) -> tuple[float, float | None]:
+    """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames or None without a target) from
+    the cut's coarse nodes (culling, footprint and S-1 error from ``Runtime.node_errors(detail_only=True)``, E-1 from
+    ``node_mean_square``) and its mesh (``positions`` of its vertices, ``triangles`` indices into them)."""
+    cam = rt.camera
+    act = np.flatnonzero(rt.cut.active)
+    nodes = act[act >= rt.h.num_vertices]
+    ne = rt.node_errors(nodes, exact=False, detail_only=True)
+    ms = node_mean_square(rt, nodes)
+    area = np.minimum(projected_area(rt, nodes), float(cam.width * cam.height))
+    sse = np.where(ne.culled, 0.0, ms * area)
+    cov = covered_pixels(positions, triangles, rt.vp, cam.eye, cam.width, cam.height)
+    new = None if rt.target_psnr is None else steer(rt.error_bound, rt.target_psnr, ne.error, sse, cov)
+    return psnr(float(sse.sum()), cov), new
+
+
+_SURFACE: dict = {}  # id(hierarchy) -> (weak reference to it, (N,) surface area under each node)
+
+
+def projected_area(rt, nodes: np.ndarray) -> np.ndarray:
+    """The pixels each node's surface covers: its area in the scene (a third of each face at each of its leaves)
+    foreshortened by its normal cone's axis toward the eye (at least 0.2; 0.5 for cones wider than 60 degrees) and
+    scaled by (focal / depth)^2."""
+    h = rt.h
+    known = _SURFACE.get(id(h))
+    if known is None or known[0]() is not h:
+        p, f = rt.positions, rt.faces
+        fa = 0.5 * np.linalg.norm(np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]), axis=1)
+        va = np.zeros(h.num_vertices)
+        np.add.at(va, f.ravel(), np.repeat(fa / 3.0, 3))
+        run = np.r_[0.0, np.cumsum(va[h.leaf_order])]
+        _SURFACE[id(h)] = (weakref.ref(h), run[h.leaf_range[:, 1]] - run[h.leaf_range[:, 0]])
+    area = _SURFACE[id(h)][1][nodes]
+    p = rt.node_pos[nodes]
+    v = np.asarray(rt.camera.eye, np.float64)[None] - p
+    dist = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+    cos = np.abs((rt.axis[nodes] * v).sum(1)) / dist
+    cos = np.where(rt.half[nodes] > math.radians(60), 0.5, np.maximum(cos, 0.2))
+    depth = np.maximum(np.c_[p, np.ones(len(p))] @ rt.vp[3], 1e-9)
+    return area * cos * (rt.focal_px() / depth) ** 2
+
+
+def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
+    """E-1's per-pixel squared error of each coarse node under the current lights (units of white squared): the
+    samples' mean squared completion residual (``node_bounds.detail_mean_square``, made with each sample) as RMS
+    values combined like S-2's bounds: sum_j |W_jc| rms_jc for T-12, max over the samples around the light times
+    sum_j |W_jc| for a direct interpolation (M-5); the largest channel, squared."""
+    from lodprt.runtime import node_bounds
+
+    cache, h = rt.samples, rt.h
+    if "detail_ms" not in cache.derived:
+        plan, levels, white = rt.store.completion_plan(), node_bounds.height_levels(h), rt.white
+        cache.derive("detail_ms", lambda c: node_bounds.detail_mean_square(h, c, white, plan, levels),
+                     h.num_nodes - h.num_vertices, (cache.C,), np.float32)
+    rms = np.sqrt(cache.derived["detail_ms"][0][nodes - h.num_vertices][:, rt.used_slots])  # (K, U, C)
+    w = np.abs(rt.sample_weights[rt.used_samples])  # (U, 3)
+    if rms.shape[2] == 1:
+        rms = np.repeat(rms, 3, axis=2)
+    if rt.interpolation == "thesis":
+        per = (rms * w[None]).sum(1)
+    else:
+        near = rt.lighting.bracket_mask()[rt.used_slots].astype(bool)
+        per = (rms[:, near].max(1) if near.any() else rms.max(1)) * w.sum(0)[None]
+    return per.max(1) ** 2
+
+
+def toward_budget(bound: float, triangles: int, budget: int) -> float:
+    """The bound steered toward a triangle budget: x1.25 above it, /1.1 under 80% of it, else unchanged."""
+    if triangles > budget:
+        return max(bound, 1e-4) * 1.25
+    if triangles < 0.8 * budget:
+        return bound / 1.1
+    return bound
