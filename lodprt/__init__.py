@@ -3,7 +3,8 @@
 Public API (everything else may change)::
 
     scene = lodprt.load_scene("demo")                 # or a TOML scene file or a mesh path
-    result = lodprt.bake(scene, "out.zarr", sh_order=4, device="cpu")   # a BakeResult
+    result = lodprt.bake(scene, "out.zarr", sh_order=4, device="cpu")   # 5-degree light cut, as lodprt bake;
+                                                      # full=True: every vertex (lodprt bake --full)
     store = lodprt.open_store("out.zarr")
     rgb = store.radiance(sample=0, eye=(0.0, 0.5, 1.0))   # (V, 3) float32
     rt = lodprt.Runtime(store)                        # moving lights, view cut (criterion "screen")

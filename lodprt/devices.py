@@ -3,18 +3,56 @@
 from __future__ import annotations
 
 import functools
+import logging
+import os
+import sys
+import tempfile
 
 from lodprt.errors import LodprtError
+
+log = logging.getLogger(__name__)
+
+#: what Warp's native start-up wrote on stderr about CUDA (e.g. "Warp CUDA warning: Could not find or load the
+#: NVIDIA CUDA driver ..." on a machine without a GPU): logged at INFO (shown with ``lodprt -v``) and named in the
+#: error when a CUDA device is asked for, never printed otherwise
+CUDA_NOTES: list[str] = []
 
 
 @functools.cache
 def warp():
-    """Import and initialise Warp once, without its start-up banner."""
+    """Import and initialise Warp once, without its start-up banner and without its CUDA driver note on a CPU
+    machine (kept in ``CUDA_NOTES``; any other line Warp's native start-up writes on stderr is passed on)."""
     import warp as wp
 
     wp.config.log_level = wp.LOG_WARNING  # no banner, no per-module load lines
-    wp.init()
+    for line in native_stderr(wp.init):
+        if "CUDA" in line:
+            CUDA_NOTES.append(line)
+            log.info("%s", line)
+        else:
+            print(line, file=sys.stderr)
     return wp
+
+
+def native_stderr(call) -> list[str]:
+    """Run ``call()`` with file descriptor 2 (where native code prints) sent to a temporary file; its lines. When
+    descriptor 2 cannot be redirected (closed), ``call()`` runs as it is and nothing is captured."""
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:
+        call()
+        return []
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        try:
+            os.dup2(tmp.fileno(), 2)
+            call()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        tmp.seek(0)
+        text = tmp.read().decode("utf-8", "replace")
+    return [line for line in text.splitlines() if line.strip()]
 
 
 def available_devices() -> list[str]:
@@ -32,7 +70,8 @@ def resolve_device(name: str | None = None) -> str:
         return next((d for d in devices if d.startswith("cuda")), "cpu")
     alias = "cuda:0" if name == "cuda" else name
     if alias not in devices:
-        raise LodprtError(f"device {name!r} is not available here (available: {', '.join(devices)})")
+        why = f"; Warp: {' '.join(CUDA_NOTES)}" if alias.startswith("cuda") and CUDA_NOTES else ""
+        raise LodprtError(f"device {name!r} is not available here (available: {', '.join(devices)}){why}")
     return alias
 
 

@@ -154,10 +154,10 @@ def test_layout_leaves_out_what_the_scene_does_not_need(tmp_path, device):
     tri = np.array([[0, 2, 1]])
     light = {"box": [0, 1, 0, 1, 2, 1], "grid": [1, 1, 1]}
     diffuse = assemble_scene([("t", pos, tri, Material((0.5,) * 3, 0.0, 2.0))], None, light, "lights", "t")
-    res = bake(diffuse, tmp_path / "d.zarr", sh_order=4, device=device)
+    res = bake(diffuse, tmp_path / "d.zarr", sh_order=4, device=device, full=True)
     assert (res.coefficients_per_vertex, res.channels) == (1, 1)
     colour = assemble_scene([("t", pos, tri, Material((0.6, 0.3, 0.15), 0.2, 2.0))], None, light, "lights", "t")
-    res = bake(colour, tmp_path / "c.zarr", sh_order=3, device=device)
+    res = bake(colour, tmp_path / "c.zarr", sh_order=3, device=device, full=True)
     assert (res.coefficients_per_vertex, res.channels) == (9, 3)
     from lodprt.store.bake_store import open_store
 

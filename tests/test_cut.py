@@ -79,7 +79,7 @@ def test_cut_bake_coefficients_identical_to_full(tmp_path, device, bunny_floor, 
     """Vertices the cut keeps carry bit-identical coefficients to the full bake; info reports per-sample counts."""
     from lodprt.store.bake_store import open_store
 
-    full = bake(bunny_floor, tmp_path / "full.zarr", sh_order=3, device=device, tree=bunny_hierarchy)
+    full = bake(bunny_floor, tmp_path / "full.zarr", sh_order=3, device=device, tree=bunny_hierarchy, full=True)
     cut = bake(bunny_floor, tmp_path / "cut.zarr", sh_order=3, device=device, tree=bunny_hierarchy, threshold_deg=5.0)
     sf, sc = open_store(tmp_path / "full.zarr"), open_store(tmp_path / "cut.zarr")
     for k in range(sf.num_samples):

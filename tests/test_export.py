@@ -161,6 +161,71 @@ def test_export_sample_equals_radiance(stores, tmp_path, capsys, name, full):
     check_glb(out, store.radiance(4, EYE), coeffs, full=full or name.endswith("nohier"), store=store)
 
 
+def rotate(q, v):
+    """Vector ``v`` turned by the unit quaternion q = (x, y, z, w) (Hamilton, as glTF): v + 2 w (u x v) +
+    2 u x (u x v), u = (x, y, z)."""
+    u, w = np.asarray(q[:3], np.float64), float(q[3])
+    v = np.asarray(v, np.float64)
+    return v + 2 * w * np.cross(u, v) + 2 * np.cross(u, np.cross(u, v))
+
+
+def test_export_camera_and_point_lights(stores, tmp_path, capsys):
+    """The .glb has a perspective camera node at the eye whose -z looks at the target with +y up on screen, and a
+    KHR_lights_punctual point light node per light, at its position with its RGB intensity (read with pygltflib)."""
+    import pygltflib
+
+    target, lights = (0.0, 0.2, 0.0), [(0.1, 0.9, 0.1), (-0.2, 0.95, 0.0)]  # inside the light box
+    colors = [(1.0, 0.5, 0.25), (0.2, 0.4, 0.8)]
+    out = tmp_path / "cam.glb"
+    argv = ["export", stores["rgb"], "--eye", *EYE, "--target", *target, "--size", 320, 240, "--fov", 50,
+            "--outside", "error"]
+    for light, color in zip(lights, colors):
+        argv += ["--light", *light, "--color", *color]
+    rc, _, err = run([*argv, "-o", out], capsys)
+    assert rc == 0, err
+    doc, _, _ = read_glb(out)
+    g = pygltflib.GLTF2().load(str(out))
+    assert sorted(g.scenes[0].nodes) == list(range(len(g.nodes))) == [0, 1, 2, 3]
+    (cam_node,) = [n for n in g.nodes if n.camera is not None]
+    cam = g.cameras[cam_node.camera]
+    assert cam.type == "perspective"
+    assert cam.perspective.yfov == pytest.approx(np.radians(50)) and cam.perspective.aspectRatio == pytest.approx(4 / 3)
+    assert cam.perspective.znear > 0
+    np.testing.assert_allclose(cam_node.translation, EYE)
+    q = cam_node.rotation
+    assert np.linalg.norm(q) == pytest.approx(1)
+    forward = np.subtract(target, EYE) / np.linalg.norm(np.subtract(target, EYE))
+    np.testing.assert_allclose(rotate(q, (0, 0, -1)), forward, atol=1e-6)
+    screen_up = rotate(q, (0, 1, 0))
+    assert abs(screen_up @ forward) < 1e-6 and screen_up[1] > 0 and abs(rotate(q, (1, 0, 0))[1]) < 1e-6
+    assert "KHR_lights_punctual" in doc["extensionsUsed"]
+    punctual = doc["extensions"]["KHR_lights_punctual"]["lights"]
+    nodes = [n for n in doc["nodes"] if "KHR_lights_punctual" in n.get("extensions", {})]
+    assert len(punctual) == len(nodes) == 2
+    for node, light, color in zip(nodes, lights, colors):
+        spec = punctual[node["extensions"]["KHR_lights_punctual"]["light"]]
+        assert spec["type"] == "point"
+        np.testing.assert_allclose(node["translation"], light)
+        np.testing.assert_allclose(np.multiply(spec["color"], spec["intensity"]), color)
+        assert max(spec["color"]) == pytest.approx(1.0)
+
+
+def test_look_at_quaternion_in_every_direction():
+    """``look_at_quaternion`` turns -z onto the view direction and +y into the up half-plane for random views and
+    for the half turn (looking along +z, the singular case of the trace formula)."""
+    from lodprt.display.export import look_at_quaternion
+
+    rng = np.random.default_rng(3)
+    views = [((0, 0, 0), (0, 0, 1)), ((0, 0, 0), (0, 0, -1)), ((1, 2, 3), (1.0, 2.0, 4.0))]
+    views += [(tuple(rng.normal(size=3)), tuple(rng.normal(size=3))) for _ in range(50)]
+    for eye, target in views:
+        q = look_at_quaternion(eye, target, (0.0, 1.0, 0.0))
+        f = np.subtract(target, eye) / np.linalg.norm(np.subtract(target, eye))
+        np.testing.assert_allclose(rotate(q, (0, 0, -1)), f, atol=1e-9)
+        up = rotate(q, (0, 1, 0))
+        assert abs(up @ f) < 1e-9 and up[1] > 0
+
+
 @pytest.mark.parametrize("name", ["grey", "rgb"])
 @pytest.mark.parametrize("full", [False, True], ids=["cut", "full"])
 def test_export_lights_equals_radiance_command(stores, tmp_path, capsys, name, full):

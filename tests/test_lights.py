@@ -83,10 +83,15 @@ def test_outside_is_clamped_with_warning_or_refused(caplog):
     with caplog.at_level(logging.WARNING, logger="lodprt.runtime.lights"):
         idx, w, moved = li.weights([[2.0, 0.5, 0.5], [1.0, 0.0, 0.5]])
     assert moved.tolist() == [True, False]
-    assert "outside the sampled region" in caplog.text
+    assert "outside the sampled region" in caplog.text and "clamped to (1, 0.5, 0.5)" in caplog.text
     clamped = li.clamp([[2.0, 0.5, 0.5]])[0]
     np.testing.assert_array_equal(clamped, [[1.0, 0.5, 0.5]])
-    with pytest.raises(LodprtError, match="outside the sampled region"):
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="lodprt.runtime.lights"):
+        for k in range(5):  # a light circling outside the box: one interpolator warns once, counts every move
+            li.clamp([[2.0 + k, 0.5, 0.5]])
+    assert caplog.text == "" and li.clamped == 7
+    with pytest.raises(LodprtError, match=r"outside the sampled region \(light box\) \[0, 0, 0\] - \[1, 1, 1\]"):
         LightInterpolator(s, box, outside="error").weights([[2.0, 0.5, 0.5]])
 
 

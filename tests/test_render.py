@@ -346,3 +346,115 @@ def test_cli_turntable_sequence_and_gif(cut_store, tmp_path):
     assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "t.gif")]) == 0
     assert Image.open(tmp_path / "t.gif").n_frames == 4
     assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "seq")]) == 2  # not empty: no clobber
+
+
+def test_cli_render_sample_shows_the_stored_sample(cut_store, tmp_path, capsys):
+    """`render --sample K --full` draws light sample K's stored coefficients: the image equals the renderer's image
+    of ``full_frame(store, camera, sample=K)`` (the stored coefficients times the bake's intensity, no run time),
+    and differs from sample K' 's; --sample with --light is refused."""
+    from lodprt.cli.main import main
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(cut_store)
+    cam = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), fov=40.0, width=160, height=120)
+    view = VIEW[4:]  # the camera of VIEW without its --light
+    images = {}
+    for k in (1, 7):
+        out = tmp_path / f"s{k}.npy"
+        assert main(["render", str(cut_store), "--sample", str(k), "--full", *view, "-o", str(out)]) == 0
+        images[k] = np.load(out)
+    with Renderer() as r:
+        want = r.image(full_frame(store, cam, sample=1), linear=True)
+    assert want.max() > 0
+    close = np.abs(images[1] - want) <= 1e-3 * want.max()
+    assert close.mean() > 0.995, close.mean()
+    assert np.abs(images[7] - want).mean() > 0.02 * want.mean()
+    assert main(["render", str(cut_store), "--sample", "1", *VIEW, "-o", str(tmp_path / "x.npy")]) == 2
+    assert "--sample and --light exclude each other" in capsys.readouterr().err
+    assert main(["render", str(cut_store), "--sample", "99", *view, "-o", str(tmp_path / "x.npy")]) == 2
+    assert "sample 99 out of range" in capsys.readouterr().err
+
+
+def test_cli_lights_outside_the_box(cut_store, tmp_path, capsys, caplog):
+    """`render --light` outside the light box with `--outside error` exits 2 with one line naming the box; the
+    default clamps it, and a turntable whose light leaves the box every frame warns once, naming where it went."""
+    import logging
+
+    from lodprt.cli.main import main
+    from lodprt.store.bake_store import open_store
+
+    box = open_store(cut_store).light_box
+    far = ["--light", str(box[3] + 0.5), str(box[4]), str(box[5])]
+    view = VIEW[4:]
+    assert main(["render", str(cut_store), *far, *view, "--outside", "error", "-o", str(tmp_path / "e.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "lodprt render: error: light (" in err
+    assert f"light box) [{box[0]:.4g}, {box[1]:.4g}, {box[2]:.4g}] - [{box[3]:.4g}, {box[4]:.4g}, {box[5]:.4g}]" in err
+    assert not (tmp_path / "e.png").exists()
+    with caplog.at_level(logging.WARNING, logger="lodprt.runtime.lights"):
+        assert main(["turntable", str(cut_store), *far, "--eye", "0.05", "0.3", "0.45", "--size", "40", "30",
+                     "--frames", "4", "-o", str(tmp_path / "t.gif")]) == 0
+    warned = [r for r in caplog.records if "outside the sampled region" in r.getMessage()]
+    assert len(warned) == 1 and f"clamped to ({box[3]:.4g}, {box[4]:.4g}, {box[5]:.4g})" in warned[0].getMessage()
+    for command in ("render", "compare", "turntable", "export", "view", "frames", "radiance"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        assert "--outside {clamp,error}" in capsys.readouterr().out, command
+
+
+def test_one_white_for_the_frames_of_a_runtime(cut_store):
+    """Frames of one Runtime along an orbit carry its white, and ``Renderer`` tone-maps every one of them with it
+    (no white point per frame: the per-frame 99th percentile differs from frame to frame here)."""
+    from lodprt.runtime.camera import orbit
+    from lodprt.runtime.frames import auto_white
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    rt = Runtime(open_store(cut_store), device="cpu")
+    start = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), fov=40.0, width=64, height=48)
+    whites, own = [], []
+    with Renderer() as r:
+        for k in range(3):
+            rt.set_camera(orbit(start, 2 * np.pi * k / 3))
+            frame = rt.update()
+            assert frame.white == rt.white
+            whites.append(r.draw(frame)["white"])
+            own.append(auto_white(frame.radiance))
+    assert whites == [rt.white] * 3
+    assert len(set(own)) == 3  # what a white per frame would have done
+
+
+def test_cli_exr_outputs_read_back_with_openexr(cut_store, tmp_path, capsys, monkeypatch):
+    """`render -o x.exr` writes the linear radiance OpenEXR reads back equal to the `.npy` output's values; `compare
+    -o fig.exr` the two frames and their difference side by side; `turntable -o t.exr` one file per frame; without
+    the openexr package the one-line error names the extra."""
+    OpenEXR = pytest.importorskip("OpenEXR")
+    from lodprt.cli.main import main
+
+    def read(path):
+        with OpenEXR.File(str(path)) as f:
+            return np.array(f.channels()["RGB"].pixels)
+
+    npy, exr = tmp_path / "f.npy", tmp_path / "f.exr"
+    for out in (npy, exr):
+        assert main(["render", str(cut_store), *VIEW, "-o", str(out)]) == 0
+    want, got = np.load(npy), read(exr)
+    assert got.dtype == np.float32 and got.shape == want.shape == (120, 160, 3) and want.max() > 0
+    np.testing.assert_array_equal(got, want)
+    fig = tmp_path / "c.exr"
+    assert main(["compare", str(cut_store), *VIEW, "-o", str(fig)]) == 0
+    panels = read(fig)
+    assert panels.shape == (120, 480, 3)
+    lod, full, diff = panels[:, :160], panels[:, 160:320], panels[:, 320:]
+    np.testing.assert_array_equal(lod, want)  # the view cut's frame, as render draws it
+    np.testing.assert_allclose(diff, np.abs(lod - full), atol=1e-6 * want.max())
+    assert main(["turntable", str(cut_store), *VIEW, "--frames", "2", "-o", str(tmp_path / "t.exr")]) == 0
+    seq = [read(tmp_path / f"t_{k:04d}.exr") for k in range(2)]
+    np.testing.assert_allclose(seq[0], want, atol=1e-6 * want.max())  # the orbit's first view is the camera's
+    assert not np.array_equal(seq[0], seq[1])
+    assert main(["turntable", str(cut_store), *VIEW, "--frames", "2", "-o", str(tmp_path / "t.exr")]) == 2
+    assert "already exists; pass --overwrite" in capsys.readouterr().err
+    monkeypatch.setitem(__import__("sys").modules, "OpenEXR", None)  # as if the extra were not installed
+    assert main(["render", str(cut_store), *VIEW, "-o", str(tmp_path / "g.exr")]) == 2
+    err = capsys.readouterr().err
+    assert "pip install 'lodprt[exr]'" in err and len(err.strip().splitlines()) == 1

@@ -27,7 +27,7 @@ def small(bunny_path):
 @pytest.fixture(scope="module")
 def baked(small, tmp_path_factory):
     path = tmp_path_factory.mktemp("store") / "b.zarr"
-    res = bake(small, path, sh_order=3, device="cpu")  # with the hierarchy
+    res = bake(small, path, sh_order=3, device="cpu", full=True)  # with the hierarchy, every vertex
     return path, res
 
 

@@ -1,6 +1,7 @@
 """The interactive viewer: its controls without a window, a clear error without a display, and a real window
 under a virtual X server (Xvfb) when one is installed."""
 
+import dataclasses
 import os
 import shutil
 import subprocess
@@ -16,7 +17,8 @@ from lodprt.display.viewer import Slider, Viewer, ViewerState, slider_layout
 
 def state():
     cam = Camera(eye=(0.0, 0.5, 2.0), target=(0.0, 0.5, 0.0), width=200, height=100)
-    return ViewerState(camera=cam, lights=np.array([[0.0, 2.0, 0.0]]), colors=None, error_bound=0.25, alpha=0.6)
+    return ViewerState(camera=cam, lights=np.array([[0.0, 2.0, 0.0]]), colors=None, error_bound=0.25, alpha=0.6,
+                       criterion="thesis")
 
 
 def test_orbit_pan_zoom_keep_the_camera_sane():
@@ -80,6 +82,19 @@ def test_sliders_sit_in_the_bottom_left_corner_inside_the_window():
             x, y, w, h = sl.rect
             assert x >= 0 and x + w <= width / 2 + 100 and y >= height / 2 and y + h <= height and w >= 40
         assert eb.rect[1] + eb.rect[3] <= al.rect[1]
+
+
+def test_screen_criterion_shows_no_alpha():
+    """Under the screen criterion (which reads no alpha) there is one slider, the alpha keys change nothing, and the
+    overlay names the criterion without an alpha; under "thesis" it shows alpha."""
+    s = state()
+    assert "alpha 0.60" in s.knobs() and s.knobs().startswith("thesis criterion")
+    s = dataclasses.replace(state(), criterion="screen", error_bound=0.8)
+    assert [sl.name for sl in s.sliders()] == ["error_bound"]
+    s.dirty = False
+    s.step_alpha(True)
+    assert s.alpha == 0.6 and not s.dirty
+    assert s.knobs() == "screen criterion, error bound 0.8"
 
 
 def test_press_on_a_slider_sets_its_value_and_drags_it_without_orbiting():

@@ -110,6 +110,14 @@ def add_view_cut(p: argparse.ArgumentParser) -> None:
     p.add_argument("--alpha", type=float, default=0.6, metavar="A",
                    help="'thesis' only: weight of the geometric error against the luminance error (default 0.6)")
     add_interpolation(p)
+    add_outside(p)
+
+
+def add_outside(p: argparse.ArgumentParser) -> None:
+    """``--outside clamp|error``: a light outside the store's light box (``lodprt info`` prints it)."""
+    p.add_argument("--outside", choices=("clamp", "error"), default="clamp",
+                   help="a light outside the sampled region (the light box, see lodprt info): clamp it into the box "
+                        "with one warning naming where it went (default), or refuse it")
 
 
 def add_interpolation(p: argparse.ArgumentParser) -> None:

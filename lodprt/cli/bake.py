@@ -114,7 +114,7 @@ def cmd_bake(args) -> int:
             jobs=args.jobs,
             hierarchy=not args.no_hierarchy,
             hierarchy_method=args.hierarchy,
-            threshold_deg=None if args.full or args.no_hierarchy else args.threshold_deg,
+            threshold_deg=args.threshold_deg, full=args.full or args.no_hierarchy,
             progress=bars.callback("bake", "sample"),
             hierarchy_progress=bars.callback("hierarchy", "collapse"),
             resume=args.resume,

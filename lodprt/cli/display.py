@@ -54,12 +54,15 @@ def _add_diff(sub) -> None:
 def _add_render(sub) -> None:
     rn = sub.add_parser(
         "render",
-        help="render one frame offscreen (moving lights, view cut) to a PNG or a linear .npy",
+        help="render one frame offscreen (moving lights, view cut) to a PNG, a linear .npy or an OpenEXR .exr",
         description="Relight the store with the given point lights, choose the view cut for the camera and draw "
         "it offscreen (EGL). A .png is tone-mapped sRGB; a .npy is the linear radiance image (H, W, 3) float32, "
-        "background 0, no overlays. Camera: perspective, vertical field of view, right-handed, y up (docs/DISPLAY.md).",
+        "background 0, no overlays; an .exr the same radiance as OpenEXR float32 RGB (pip install 'lodprt[exr]'). Camera: perspective, vertical field of view, right-handed, y up (docs/DISPLAY.md).",
     )
-    _add_view_args(rn, "frame.png|frame.npy", required=False)
+    _add_view_args(rn, "frame.png|frame.npy|frame.exr", required=False)
+    rn.add_argument("--sample", type=int, default=None, metavar="K",
+                    help="light the scene with stored light sample K (one light there, the bake's intensity, the "
+                    "thesis interpolation: exactly that sample's coefficients), instead of --light")
     rn.add_argument("--environment", default=None, metavar="ENV",
                     help="OUT is a transfer store (bake --environment): relight it by this environment instead of point "
                     "lights (as render-environment; 'stored' uses the bake's own)")
@@ -72,9 +75,10 @@ def _add_compare(sub) -> None:
         "compare",
         help="figure: LOD frame, full-resolution frame and their difference side by side (figures 14-17)",
         description="Render the view-cut frame and the full-resolution frame for the same lights and camera, and "
-        "their per-pixel difference in false colour with its scale, side by side in one PNG.",
+        "their per-pixel difference in false colour with its scale, side by side in one PNG (fig.exr: the "
+        "linear radiance of the two frames and their absolute difference side by side, OpenEXR float32 RGB).",
     )
-    _add_view_args(cp, "fig.png")
+    _add_view_args(cp, "fig.png|fig.exr")
     cp.add_argument("--scale", type=float, default=None, metavar="S",
                     help="difference (relative to white) at the top of the colour scale (default: its 99.5th percentile)")
     cp.set_defaults(handler=cmd_compare)
@@ -83,13 +87,15 @@ def _add_compare(sub) -> None:
 def _add_turntable(sub) -> None:
     tt = sub.add_parser(
         "turntable",
-        help="an orbit of the camera with moving lights: PNG sequence (a folder), an animated GIF or an H.264 MP4",
+        help="an orbit of the camera with moving lights: PNG sequence (a folder), an animated GIF, an H.264 MP4 or "
+        "an EXR sequence",
         description="Orbit the camera around the target (and the lights around the vertical axis through it) "
         "and write every frame: OUT a folder gets frame_0000.png ..., OUT ending in .gif an animated GIF, OUT "
         "ending in .mp4 an H.264 video (needs the optional imageio-ffmpeg: pip install 'lodprt[video]'; odd sizes "
-        "are padded to even).",
+        "are padded to even), OUT NAME.exr the linear radiance of each frame as OpenEXR float32 RGB, NAME_0000.exr "
+        "... (pip install 'lodprt[exr]').",
     )
-    _add_view_args(tt, "DIR|video.gif|video.mp4", required=False)
+    _add_view_args(tt, "DIR|video.gif|video.mp4|NAME.exr", required=False)
     tt.add_argument("--frames", type=int, default=36, metavar="N", help="frames per orbit (default 36)")
     tt.add_argument("--light-turns", type=float, default=1.0, metavar="T",
                     help="turns the lights make about the vertical axis per orbit (default 1; 0 keeps them still)")
@@ -100,7 +106,7 @@ def _add_turntable(sub) -> None:
 def _add_view(sub) -> None:
     vw = sub.add_parser(
         "view",
-        help="interactive viewer (orbit, drag lights, error bound and alpha, wireframe, LOD toggle)",
+        help="interactive viewer (orbit, drag lights, the criterion's knobs, wireframe, LOD toggle)",
         description="Open a window on the store: drag to orbit, right-drag to pan, wheel to zoom, shift-drag to "
         "move the selected light; keys in docs/DISPLAY.md (H prints them). Needs a display (X11 or Xvfb).",
     )
@@ -126,7 +132,7 @@ def _view_setup(args, store):
 
 def _view_cut(args) -> dict:
     return {"error_bound": args.error_bound, "alpha": args.alpha, "criterion": args.criterion,
-            "interpolation": args.interpolation, "target_psnr": args.target_psnr}
+            "interpolation": args.interpolation, "target_psnr": args.target_psnr, "outside": args.outside}
 
 
 def _draw_options(args) -> dict:
@@ -156,6 +162,8 @@ def cmd_render(args) -> int:
     from lodprt.store.bake_store import open_store
 
     store = open_store(args.store)
+    if args.sample is not None:
+        _sample_as_light(args, store)
     lights, colors, camera = _view_setup(args, store)
     stats = render_to_file(store, args.out, lights=lights, colors=colors, camera=camera, lod=not args.full,
                            overwrite=args.overwrite, **_view_cut(args), **_draw_options(args))
@@ -164,10 +172,22 @@ def cmd_render(args) -> int:
     return 0
 
 
+def _sample_as_light(args, store) -> None:
+    """``--sample K``: one light at stored sample K, lit by the thesis interpolation (its T-12 weights select sample
+    K alone, so the frame shows the stored coefficients), as ``export --sample`` and ``radiance --sample`` do."""
+    if args.light:
+        raise LodprtError("--sample and --light exclude each other")
+    if args.color:
+        raise LodprtError("--color goes with --light, not with --sample")
+    store.check_sample(args.sample)
+    args.light = [store.light_positions[args.sample].tolist()]
+    args.interpolation = "thesis"
+
+
 def _render_environment(args) -> int:
     """``render OUT --environment ENV``: a transfer store relit by an environment, as render-environment."""
-    if args.light:
-        raise LodprtError("--light and --environment exclude each other (point lights or an environment)")
+    if args.light or args.sample is not None:
+        raise LodprtError("--light/--sample and --environment exclude each other (point lights or an environment)")
     if args.eye is None:
         raise LodprtError("--environment needs --eye X Y Z")
     return environment_cli.render_environment(

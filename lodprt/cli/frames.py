@@ -47,7 +47,7 @@ def cmd_frames(args) -> int:
     rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
                   triangle_budget=args.triangle_budget, device=args.device, lod=not args.full,
                   interpolation=args.interpolation,
-                  target_psnr=args.target_psnr)
+                  target_psnr=args.target_psnr, outside=args.outside)
     errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
     try:

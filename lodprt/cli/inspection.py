@@ -15,9 +15,9 @@ def register(sub) -> None:
 
 
 def _add_info(sub) -> None:
-    i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds.")
+    i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds: mesh, SH order, hierarchy, the light box (the sampled region of --light), bake time, bytes and the light samples.")
     cli_args.add_store(i)
-    cli_args.add_json(i, "a JSON object (vertices, sh_order, bake_seconds, samples, ...)")
+    cli_args.add_json(i, "a JSON object (vertices, sh_order, bake_seconds, light_box, samples, ...)")
     i.set_defaults(handler=cmd_info)
 
 
@@ -36,8 +36,7 @@ def _add_radiance(sub) -> None:
     cli_args.add_sample(which)
     cli_args.add_light(which)
     cli_args.add_colors(r)
-    r.add_argument("--outside", choices=("clamp", "error"), default="clamp",
-                   help="a light outside the sampled region: clamp it into the region with a warning (default) or refuse")
+    cli_args.add_outside(r)
     cli_args.add_interpolation(r)
     cli_args.add_eye(r)
     cli_args.add_output(r, "rad.npy", "output .npy")
@@ -60,6 +59,10 @@ def cmd_info(args) -> int:
     if info["hierarchy_nodes"] is not None:
         print(f"  hierarchy {info['hierarchy_nodes']:,} nodes, {info['hierarchy_roots']:,} roots, depth "
               f"{info['hierarchy_depth']}, built ({info['hierarchy_method']}) in {info['hierarchy_seconds']:.1f} s")
+    box, lights = info["light_box"], info["lights"]
+    print(f"  light box [{', '.join(f'{v:.4g}' for v in box[:3])}] - [{', '.join(f'{v:.4g}' for v in box[3:])}] "
+          f"(grid {' x '.join(map(str, lights['grid']))}, falloff {lights['falloff']}; --light outside it is "
+          "clamped into it, or refused with --outside error)")
     print(f"  bake {info['bake_seconds']:.2f} s on {info['device']}; {info['bytes_total'] / 1024:,.0f} KiB payload, "
           f"{info['bytes_on_disk'] / 1024:,.0f} KiB on disk")
     n = max(len(info["samples"]), 1)

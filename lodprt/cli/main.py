@@ -19,6 +19,7 @@ import sys
 
 from lodprt.cli import bake, compress, display, environment, export, frames, inspection, volume
 from lodprt.errors import LodprtError
+from lodprt.version import __version__
 
 COMMAND_MODULES = (bake, compress, inspection, frames, display, environment, volume, export)
 """The command families, in the order ``lodprt --help`` lists their commands."""
@@ -31,10 +32,22 @@ def build_parser() -> argparse.ArgumentParser:
         description="Level-of-detail based precomputed local radiance transfer (bake, inspect, reconstruct).",
     )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details to stderr")
+    p.add_argument("--version", action="version", version=f"lodprt {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in COMMAND_MODULES:
         module.register(sub)
     return p
+
+
+#: the library's words for an argument, and the flag the command line has for it
+FLAGS = {"overwrite=True": "--overwrite"}
+
+
+def as_flags(message: str) -> str:
+    """A library error as the command line says it: ``overwrite=True`` becomes ``--overwrite``."""
+    for api, flag in FLAGS.items():
+        message = message.replace(api, flag)
+    return message
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.handler(args)
     except LodprtError as exc:
-        print(f"lodprt {args.command}: error: {exc}", file=sys.stderr)
+        print(f"lodprt {args.command}: error: {as_flags(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C: a bake's Interrupted says what it left (bake --resume)
         print(f"lodprt {args.command}: interrupted" + (f": {exc}" if str(exc) else ""), file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.display.pictures import check_output
+from lodprt.display.pictures import check_exr, check_output, write_exr
 from lodprt.display.render import Renderer
 from lodprt.runtime.frames import auto_white, full_frame
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
@@ -14,10 +14,12 @@ from lodprt.runtime.sources import frame_source
 
 def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
                    criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+                   outside: str = "clamp",
                    overwrite: bool = False, scale: float | None = None, wireframe: bool = False,
                    per_vertex: bool = False, exposure: float = 0.0, white: float | None = None,
                    markers: bool = True) -> dict:
-    """Write the three-panel PNG ``out``; returns the numbers in its title.
+    """Write the three-panel PNG ``out`` (or, for ``out`` ending in .exr, the panels' linear radiance side by side as
+    OpenEXR float32 RGB: cut, full, |cut - full|, no titles); returns the numbers in its title.
 
     Both frames come from one run time (``frame_source``; LOD switched off for the second), share the white point
     (``white``, default the run time's) and are drawn linear for the difference: ``|LOD - full|`` averaged over
@@ -29,9 +31,11 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = check_output(out, (".png",), overwrite=overwrite)
+    out = check_output(out, (".png", ".exr"), overwrite=overwrite)
+    if out.suffix.lower() == ".exr":
+        check_exr()
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     error_bound = getattr(source, "error_bound", error_bound)
     source.set_lights(lights, colors)
     source.set_camera(camera)
@@ -43,6 +47,11 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     draw = {"per_vertex": per_vertex, "exposure": exposure, "white": white, "light_markers": markers}
     with Renderer() as r:
         numbers, rel, covered = frame_error(r, lod, full, white, per_vertex=per_vertex)
+        if out.suffix.lower() == ".exr":  # the linear panels: cut | full | |cut - full|, in radiance
+            lin = [r.image(f, linear=True, per_vertex=per_vertex) for f in (lod, full)]
+            write_exr(out, np.concatenate([lin[0], lin[1], np.abs(lin[0] - lin[1])], axis=1))
+            return {"triangles_lod": int(len(lod.triangles)), "triangles_full": int(len(full.triangles)), **numbers,
+                    "white": float(white)}
         img_lod = r.image(lod, wireframe=wireframe, **draw)
         img_full = r.image(full, **draw)
     psnr, rmse = numbers["psnr_db"], numbers["relative_rmse"]

@@ -10,7 +10,8 @@ radiance toward the eye, T-7: tone-mapped as ``lodprt render`` shows it, or over
 * ``_RADIANCE`` (VEC3 float): the linear radiance toward the eye, unclipped (COLOR_0 must stay in [0, 1]);
 * ``_VERTEX_ID`` (SCALAR float, exact below 2^24): the vertex's index in the store.
 
-The material is unlit (KHR_materials_unlit) with base colour 1, so a viewer shows COLOR_0 as it is. The file is
+The material is unlit (KHR_materials_unlit) with base colour 1, so a viewer shows COLOR_0 as it is. A camera node
+sits at the frame's eye (looking at its target) and a KHR_lights_punctual point-light node at each light. The file is
 written by :func:`glb_bytes` (glTF 2.0 binary container: a JSON chunk and one BIN chunk, every view 4-byte aligned);
 trimesh's exporter is not used: it stores COLOR_0 as 8-bit, which would quantise the colours and lose the exact
 map back to radiance. The Khronos glTF validator reports no issue on these files (docs/EXPORT.md).
@@ -58,7 +59,7 @@ def check_glb_output(out, overwrite: bool) -> Path:
 def export_frame(store, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                  up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
                  error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
-                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None):
+                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None, outside: str = "clamp"):
     """(frame, source) for the export: the run time (or full-resolution frames for stores without a hierarchy)
     exactly as ``lodprt render`` draws it. ``sample`` K lights the scene with stored light sample K with the bake's
     intensity (a light there, by the thesis interpolation, whose T-12 weights select that sample alone);
@@ -79,7 +80,7 @@ def export_frame(store, *, sample: int | None = None, lights=None, colors=None, 
     target = tuple(target) if target is not None else scene_centre(store)
     camera = Camera(eye=eye, target=target, up=tuple(up), fov=fov, width=int(size[0]), height=int(size[1]))
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     return source.update(), source
@@ -114,8 +115,54 @@ def unit_normals(normals) -> np.ndarray:
     return n.astype(np.float32)
 
 
+def look_at_quaternion(eye, target, up) -> list[float]:
+    """The glTF node rotation (x, y, z, w) of a camera at ``eye`` looking at ``target`` with ``up`` up: a glTF
+    camera looks down its local -z with +y up, so the rotation's columns are (right, up, -forward)."""
+    f = np.subtract(target, eye).astype(np.float64)
+    f /= np.linalg.norm(f)
+    r = np.cross(f, up)
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    m = np.stack([r, u, -f], axis=1)  # columns
+    w = np.sqrt(max(1.0 + m[0, 0] + m[1, 1] + m[2, 2], 0.0)) / 2
+    if w > 1e-6:
+        q = [(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w]
+    else:  # a half turn: the axis from the largest diagonal entry
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        t = np.sqrt(max(1.0 + m[i, i] - m[j, j] - m[k, k], 0.0)) / 2
+        q = [0.0, 0.0, 0.0, (m[k, j] - m[j, k]) / (4 * t)]
+        q[i], q[j], q[k] = t, (m[j, i] + m[i, j]) / (4 * t), (m[k, i] + m[i, k]) / (4 * t)
+    q = np.asarray(q) / np.linalg.norm(q)
+    return [float(x) for x in q]
+
+
+def scene_nodes(camera, lights, light_colors) -> tuple[list[dict], dict, dict]:
+    """glTF nodes for the frame's ``camera`` (a perspective camera at the eye) and its point ``lights``
+    (KHR_lights_punctual, colour the RGB intensity over its largest channel, intensity that channel in lodprt's
+    units), with the document's ``cameras`` and ``extensions`` entries."""
+    nodes, doc = [], {}
+    if camera is not None:
+        distance = float(np.linalg.norm(np.subtract(camera.target, camera.eye))) or 1.0
+        doc["cameras"] = [{"type": "perspective", "name": "eye", "perspective": {
+            "yfov": float(np.radians(camera.fov)), "aspectRatio": float(camera.width) / float(camera.height),
+            "znear": float(camera.near or 1e-3 * distance), **({"zfar": float(camera.far)} if camera.far else {})}}]
+        nodes.append({"name": "eye", "camera": 0, "translation": [float(x) for x in camera.eye],
+                      "rotation": look_at_quaternion(camera.eye, camera.target, camera.up)})
+    punctual = []
+    for k, (p, c) in enumerate(zip(np.asarray(lights, np.float64).reshape(-1, 3),
+                                   np.asarray(light_colors, np.float64).reshape(-1, 3))):
+        top = float(c.max())
+        punctual.append({"type": "point", "name": f"light {k}", "intensity": top,
+                         "color": [float(x) for x in (c / top if top > 0 else np.ones(3))]})
+        nodes.append({"name": f"light {k}", "translation": [float(x) for x in p],
+                      "extensions": {"KHR_lights_punctual": {"light": k}}})
+    ext = {"KHR_lights_punctual": {"lights": punctual}} if punctual else {}
+    return nodes, doc, ext
+
+
 def glb_bytes(positions, triangles, attributes: dict[str, np.ndarray], *, extras: dict | None = None,
-              unlit: bool = True) -> bytes:
+              unlit: bool = True, camera=None, lights=None, light_colors=None) -> bytes:
     """A binary glTF 2.0 file: one mesh of one triangle primitive, one node, one scene.
 
     positions (V, 3), triangles (M, 3) indices into them, attributes {semantic: (V,) or (V, k <= 4) array, stored
@@ -157,16 +204,26 @@ def glb_bytes(positions, triangles, attributes: dict[str, np.ndarray], *, extras
         if not np.isfinite(a).all():
             raise LodprtError(f"glTF export: attribute {name} has non-finite values")
         prim["attributes"][name] = add(a, FLOAT, ARRAY_BUFFER)
-    doc = {"asset": {"version": "2.0", "generator": f"lodprt {__version__}"}, "scene": 0, "scenes": [{"nodes": [0]}],
-           "nodes": [{"mesh": 0, "name": "lodprt"}], "meshes": [{"name": "lodprt", "primitives": [prim]}],
+    more, parts, ext = scene_nodes(camera, [] if lights is None else lights,
+                                   [] if light_colors is None else light_colors)
+    nodes = [{"mesh": 0, "name": "lodprt"}, *more]
+    doc = {"asset": {"version": "2.0", "generator": f"lodprt {__version__}"}, "scene": 0,
+           "scenes": [{"nodes": list(range(len(nodes)))}], "nodes": nodes,
+           "meshes": [{"name": "lodprt", "primitives": [prim]}], **parts,
            "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": offset}]}
     if extras:
         doc["asset"]["extras"] = extras
+    used = []
     if unlit:
         prim["material"] = 0
         doc["materials"] = [{"name": "radiance", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0],
                              "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_unlit": {}}}]
-        doc["extensionsUsed"] = ["KHR_materials_unlit"]
+        used.append("KHR_materials_unlit")
+    if ext:
+        doc["extensions"] = ext
+        used.extend(ext)
+    if used:
+        doc["extensionsUsed"] = used
     text = json.dumps(doc, separators=(",", ":")).encode()
     text += b" " * (-len(text) % 4)
     binary = b"".join(blobs)
@@ -193,7 +250,8 @@ def write_glb(frame, out, *, vertex_colors: str = "display", white: float | None
             "lights": np.asarray(frame.lights).tolist(), "light_colors": np.asarray(frame.light_colors).tolist(),
             "sh_basis": "lodprt real SH, index l(l+1)+m, no Condon-Shortley phase; radiance toward e = "
                         "sum_i _SH_i y_i(normalize(e - POSITION))"}
-    data = glb_bytes(frame.positions, frame.triangles, attributes, extras={"lodprt": {**info, **(extras or {})}})
+    data = glb_bytes(frame.positions, frame.triangles, attributes, extras={"lodprt": {**info, **(extras or {})}},
+                     camera=frame.camera, lights=frame.lights, light_colors=frame.light_colors)
     partial = out.with_name(f".{out.name}.partial")
     try:
         partial.write_bytes(data)
@@ -208,6 +266,7 @@ def export_glb(store, out, *, sample: int | None = None, lights=None, colors=Non
                up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
                error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
                interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+               outside: str = "clamp",
                vertex_colors: str = "display", white: float | None = None, exposure: float = 0.0,
                overwrite: bool = False) -> dict:
     """``lodprt export``: light ``store`` (a Store or a path; ``sample`` K or point ``lights``), take the view cut
@@ -224,7 +283,8 @@ def export_glb(store, out, *, sample: int | None = None, lights=None, colors=Non
         sample = store.num_samples // 2
     frame, source = export_frame(store, sample=sample, lights=lights, colors=colors, eye=eye, target=target, up=up,
                                  fov=fov, size=size, lod=lod, error_bound=error_bound, alpha=alpha,
-                                 criterion=criterion, interpolation=interpolation, target_psnr=target_psnr)
+                                 criterion=criterion, interpolation=interpolation, target_psnr=target_psnr,
+                                 outside=outside)
     if vertex_colors == "display" and white is None:
         white = getattr(source, "white", None) or auto_white(frame.radiance)
     extras = {"store": str(store.path), "sample": sample, "lod": bool(getattr(source, "lod", False))}

@@ -31,15 +31,42 @@ def check_output(path, suffixes: tuple[str, ...], *, overwrite: bool) -> Path:
     if not path.parent.is_dir():
         raise LodprtError(f"{path}: the folder {path.parent} does not exist")
     if path.exists() and not overwrite:
-        raise LodprtError(f"{path}: already exists; pass --overwrite to replace it")
+        raise LodprtError(f"{path}: already exists; pass overwrite=True to replace it")
     return path
 
 
+EXR_EXTRA = "pip install 'lodprt[exr]'"
+#: outputs holding the linear radiance (float32, background 0, no overlays) rather than a tone-mapped picture
+LINEAR_SUFFIXES = (".npy", ".exr")
+
+
+def check_exr() -> None:
+    """LodprtError naming the extra when the optional ``openexr`` package is missing (before any work)."""
+    try:
+        import OpenEXR  # noqa: F401
+    except ImportError as exc:
+        raise LodprtError(f"writing .exr needs the optional openexr package; {EXR_EXTRA}") from exc
+
+
+def write_exr(path, image: np.ndarray) -> None:
+    """(H, W, 3) linear radiance -> an OpenEXR file of float32 R, G, B channels (ZIP compressed, lossless), row 0
+    at the top, through the optional ``openexr`` package."""
+    check_exr()
+    import OpenEXR
+
+    rgb = np.ascontiguousarray(np.asarray(image, np.float32)[:, :, :3])
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGB": rgb}) as f:
+        f.write(str(path))
+
+
 def save_image(path, image: np.ndarray) -> None:
-    """(H, W, 3) uint8 -> PNG, or float32 linear -> .npy."""
+    """(H, W, 3) uint8 -> PNG, or float32 linear -> .npy or .exr (float32 RGB)."""
     path = Path(path)
     if path.suffix.lower() == ".npy":
         np.save(path, np.asarray(image, np.float32))
+    elif path.suffix.lower() == ".exr":
+        write_exr(path, image)
     else:
         from PIL import Image
 
@@ -102,16 +129,20 @@ class VideoWriter:
 
 def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
                    criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+                   outside: str = "clamp",
                    lod: bool = True, overwrite: bool = False, **draw) -> dict:
-    """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped,
-    .npy linear (H, W, 3) float32). ``draw`` keywords go to ``Renderer.draw``. Returns the frame's stats."""
-    out = check_output(out, (".png", ".npy"), overwrite=overwrite)
+    """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped;
+    .npy linear (H, W, 3) float32; .exr the same radiance as OpenEXR float32 RGB, needs the ``exr`` extra).
+    ``draw`` keywords go to ``Renderer.draw``. Returns the frame's stats."""
+    out = check_output(out, (".png", ".npy", ".exr"), overwrite=overwrite)
+    if out.suffix.lower() == ".exr":
+        check_exr()
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     frame = source.update()
-    linear = out.suffix.lower() == ".npy"
+    linear = out.suffix.lower() in LINEAR_SUFFIXES
     if draw.get("white") is None and not linear:
         draw["white"] = source.white or auto_white(frame.radiance)
     with Renderer() as renderer:
@@ -125,30 +156,34 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
 def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, light_turns: float = 1.0,
               fps: float = 12.0, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
               criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+              outside: str = "clamp",
               overwrite: bool = False, **draw) -> Path:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
     turning ``light_turns`` times the other way about the same axis (clamped to the sampled light region by the
-    run time). ``out`` a folder (created; frame_0000.png, ...), a .gif (imageio) or an .mp4 (H.264 through the
-    optional imageio-ffmpeg, ``VideoWriter``; odd sizes padded to even). One run time for the whole orbit, so the
+    run time). ``out`` a folder (created; frame_0000.png, ...), a .gif (imageio), an .mp4 (H.264 through the
+    optional imageio-ffmpeg, ``VideoWriter``; odd sizes padded to even) or ``NAME.exr``: the linear radiance of
+    every frame as OpenEXR float32 RGB, ``NAME_0000.exr``, ``NAME_0001.exr``, ... beside it (the ``exr`` extra). One run time for the whole orbit, so the
     view cut moves incrementally from frame to frame and the white point stays fixed."""
     out = Path(out)
     if frames < 1:
         raise LodprtError(f"--frames {frames}: must be >= 1")
-    gif, video = out.suffix.lower() == ".gif", None
-    if gif:
+    gif, video, exr = out.suffix.lower() == ".gif", None, None
+    if out.suffix.lower() == ".exr":
+        exr = exr_sequence(out, frames, overwrite=overwrite)
+    elif gif:
         check_output(out, (".gif",), overwrite=overwrite)
         import imageio.v3 as iio
     elif out.suffix.lower() == ".mp4":
         video = VideoWriter(check_output(out, (".mp4",), overwrite=overwrite), fps=fps)
     elif out.suffix:
-        raise LodprtError(f"{out}: give a folder (PNG sequence), a .gif or an .mp4 path")
+        raise LodprtError(f"{out}: give a folder (PNG sequence), a .gif, an .mp4 or an .exr (EXR sequence) path")
     elif out.exists() and (not out.is_dir() or (any(out.iterdir()) and not overwrite)):
-        raise LodprtError(f"{out}: already exists and is not an empty folder; pass --overwrite to write into it")
+        raise LodprtError(f"{out}: already exists and is not an empty folder; pass overwrite=True to write into it")
     elif not out.parent.is_dir():
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     images = []
     with Renderer() as renderer, _aborting(video):
         for k in range(frames):
@@ -159,6 +194,9 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
             kw = dict(draw)
             if kw.get("white") is None:
                 kw["white"] = source.white or auto_white(frame.radiance)
+            if exr is not None:
+                write_exr(exr[k], renderer.image(frame, linear=True, per_vertex=kw.get("per_vertex", False)))
+                continue
             img = renderer.image(frame, **kw)
             if gif:
                 images.append(img)
@@ -171,7 +209,20 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
             video.close()
     if gif:
         iio.imwrite(out, np.stack(images), duration=1000.0 / fps, loop=0)
-    return out
+    return out if exr is None else exr[0].with_name(f"{out.stem}_0000..{frames - 1:04d}.exr")
+
+
+def exr_sequence(out: Path, frames: int, *, overwrite: bool) -> list[Path]:
+    """The files of an EXR turntable ``out`` = NAME.exr: NAME_0000.exr ... beside it, checked before any work (the
+    folder exists, the extra is installed, no file replaced without ``overwrite``)."""
+    check_exr()
+    if not out.parent.is_dir():
+        raise LodprtError(f"{out}: the folder {out.parent} does not exist")
+    names = [out.with_name(f"{out.stem}_{k:04d}.exr") for k in range(frames)]
+    there = [n for n in names if n.exists()]
+    if there and not overwrite:
+        raise LodprtError(f"{there[0]}: already exists; pass overwrite=True to replace the sequence")
+    return names
 
 
 @contextlib.contextmanager

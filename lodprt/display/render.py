@@ -425,7 +425,8 @@ class Renderer:
         default an offscreen one of the camera's size, RGBA8, or RGBA32F with ``linear``).
 
         ``linear``: raw radiance, background 0, no wireframe or markers. Otherwise tone-mapped sRGB with
-        ``exposure`` (stops) and ``white`` (None: ``auto_white(frame.radiance)``), ``wireframe`` edges of the
+        ``exposure`` (stops) and ``white`` (None: ``frame.white``, the white of the Runtime that made the frame,
+        one for all its frames; else ``auto_white(frame.radiance)``), ``wireframe`` edges of the
         frame's triangles, light markers at ``frame.lights``. Returns {"white", "triangles", "gl_error"}.
         """
         import moderngl
@@ -440,7 +441,7 @@ class Renderer:
         view, proj = camera_matrices(cam, np.vstack([pos, lights]) if light_markers and not linear else pos)
         mvp = (proj @ view).T.astype(np.float32).tobytes()  # column-major
         if white is None:
-            white = auto_white(frame.radiance)
+            white = getattr(frame, "white", None) or auto_white(frame.radiance)
         if not (np.isfinite(white) and white > 0 and np.isfinite(exposure)):
             raise LodprtError(f"tone mapping: white {white!r} must be > 0 and exposure {exposure!r} finite")
         target.use()

@@ -7,13 +7,14 @@ Controls (also printed by H):
     wheel              zoom (move the eye toward the target)    R                     reset the camera
     shift + left drag  move the selected light in the screen plane; shift + wheel moves it toward/away from you
     Tab                select the next light                    A / Delete            add / remove a light
-    [ / ]              error bound / 1.25, x 1.25               , / .                 alpha - / + 0.05
+    [ / ]              error bound / 1.25, x 1.25               , / .                 alpha - / + 0.05 (thesis)
     left press / drag on a slider (bottom left): set the error bound or alpha (0 to 1) from the x position
     W wireframe        L LOD on/off                             V per-vertex / per-fragment radiance
     M light markers    - / =  exposure - / + 1/2 stop            H help     Q / Escape quit
 
-The overlay (top left) shows triangles, vertices, error bound, alpha, lights and the frame time (run-time update
-and draw); the sliders (bottom left) show the error bound and alpha and follow the keys. Without a display it
+The overlay (top left) shows triangles, vertices, the active criterion with its knobs (the error bound; alpha only
+for "thesis", the only criterion that reads it), lights and the frame time (run-time update and draw); the sliders
+(bottom left) show the same knobs and follow the keys. Without a display it
 raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
 """
 
@@ -83,12 +84,13 @@ class Slider:
 SLIDER_MARGIN, SLIDER_ROW, SLIDER_LABEL, SLIDER_VALUE = 6, 16, 72, 44  # pixels: edge gap, row height, text widths
 
 
-def slider_layout(width: int, height: int) -> tuple[Slider, ...]:
-    """The error-bound and alpha sliders in the bottom-left corner of a ``width`` x ``height`` pixel window: a label
-    column, the track, then the value; the track is 160 pixels wide, less in a narrow window (at least 40)."""
+def slider_layout(width: int, height: int, *, alpha: bool = True) -> tuple[Slider, ...]:
+    """The error-bound and (with ``alpha``, the thesis criterion's knob) alpha sliders in the bottom-left corner of a
+    ``width`` x ``height`` pixel window: a label column, the track, then the value; the track is 160 pixels wide,
+    less in a narrow window (at least 40)."""
     track = max(40, min(160, width - 2 * SLIDER_MARGIN - SLIDER_LABEL - SLIDER_VALUE - 8))
     x0 = SLIDER_MARGIN + 4 + SLIDER_LABEL
-    rows = (("error_bound", "error bound"), ("alpha", "alpha"))
+    rows = (("error_bound", "error bound"), ("alpha", "alpha"))[: 2 if alpha else 1]
     top = height - SLIDER_MARGIN - 4 - SLIDER_ROW * len(rows)
     return tuple(Slider(name, label, (x0, top + i * SLIDER_ROW + 2, track, SLIDER_ROW - 4))
                  for i, (name, label) in enumerate(rows))
@@ -188,6 +190,7 @@ class ViewerState:
     colors: np.ndarray | None
     error_bound: float
     alpha: float
+    criterion: str = "screen"  # the view cut's; alpha is a knob of "thesis" only
     lod: bool = True
     wireframe: bool = False
     per_vertex: bool = False
@@ -200,7 +203,12 @@ class ViewerState:
     # -- sliders and the keys that change the same values -------------------------------------------------------
     def sliders(self) -> tuple[Slider, ...]:
         """The sliders laid out for the current window (camera) size, in its pixels."""
-        return slider_layout(self.camera.width, self.camera.height)
+        return slider_layout(self.camera.width, self.camera.height, alpha=self.criterion == "thesis")
+
+    def knobs(self) -> str:
+        """The active criterion and its knobs, as the overlay prints them (alpha only for "thesis")."""
+        return f"{self.criterion} criterion, error bound {self.error_bound:.4g}" + (
+            f", alpha {self.alpha:.2f}" if self.criterion == "thesis" else "")
 
     def set_value(self, name: str, value: float) -> None:
         """Error bound (>= 0) or alpha (clamped to [0, 1]); what the sliders and the keys both go through."""
@@ -215,7 +223,9 @@ class ViewerState:
         self.set_value("error_bound", (e * 1.25 if e > 0 else 0.01) if up else e / 1.25)
 
     def step_alpha(self, up: bool) -> None:
-        """``.`` / ``,``: alpha + or - 0.05 within [0, 1]."""
+        """``.`` / ``,``: alpha + or - 0.05 within [0, 1] (the thesis criterion only: the others have no alpha)."""
+        if self.criterion != "thesis":
+            return
         self.set_value("alpha", round(self.alpha + (0.05 if up else -0.05), 10))
 
     # -- the mouse (pixels of the window's framebuffer, origin top left) -------------------------------------------
@@ -317,8 +327,13 @@ class Viewer:
 
     def __init__(self, store, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
                  criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+                 outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True):
+        if outside == "error":  # the starting lights; a light dragged out of the box later is clamped
+            from lodprt.runtime.lights import LightInterpolator
+
+            LightInterpolator(store.light_positions, store.light_box, outside="error").clamp(lights)
         _check_display()
         import moderngl_window
         from moderngl_window.conf import settings
@@ -329,7 +344,8 @@ class Viewer:
             error_bound = DEFAULT_ERROR_BOUND.get(criterion, 0.25)
         self.state = ViewerState(camera=camera, lights=np.asarray(lights, np.float64).reshape(-1, 3).copy(),
                                  colors=None if colors is None else np.asarray(colors, np.float64).reshape(-1, 3),
-                                 error_bound=error_bound, alpha=alpha, lod=lod, wireframe=wireframe,
+                                 error_bound=error_bound, alpha=alpha, criterion=criterion, lod=lod,
+                                 wireframe=wireframe,
                                  per_vertex=per_vertex, markers=light_markers, exposure=exposure)
         self.home = camera
         self.white = white
@@ -430,7 +446,7 @@ class Viewer:
         st = self.frame.stats
         text = (f"{info['triangles']:,} triangles, {len(self.frame.positions):,} vertices, "
                 f"{'LOD' if getattr(self.source, 'lod', False) else 'full resolution'}\n"
-                f"error bound {s.error_bound:.4g}  alpha {s.alpha:.2f}  exposure {s.exposure:+.1f}\n"
+                f"{s.knobs()}  exposure {s.exposure:+.1f}\n"
                 f"light {s.selected + 1} of {len(s.lights)} at ({', '.join(f'{x:.3f}' for x in s.lights[s.selected])})\n"
                 f"update {self.ms_update:.0f} ms (cut {st.get('ms_cut', 0.0):.0f}), draw {self.ms_draw:.0f} ms  [H help]")
         self.overlay.draw(text, w.buffer_size, s.sliders(), {"error_bound": s.error_bound, "alpha": s.alpha})

@@ -128,6 +128,11 @@ class Scene:
     lights: Lights
     source: str
 
+    def __repr__(self) -> str:
+        names = ", ".join(self.object_names[:4]) + (", ..." if len(self.object_names) > 4 else "")
+        return (f"Scene({self.source!r}: {self.num_vertices:,} vertices, {len(self.faces):,} triangles, objects "
+                f"[{names}], {len(self.lights.positions)} light samples)")
+
     @property
     def num_vertices(self) -> int:
         return len(self.positions)

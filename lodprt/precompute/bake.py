@@ -33,6 +33,10 @@ from lodprt.store.writer import FORMAT_NAME, StoreWriter
 
 log = logging.getLogger(__name__)
 
+#: the light cut's incident-angle threshold of ``bake`` and ``lodprt bake`` (degrees; T-11)
+DEFAULT_THRESHOLD_DEG = 5.0
+
+
 @dataclasses.dataclass
 class BakeResult:
     """What a bake wrote and how long it took (``bake_seconds`` excludes kernel loading, ``load_seconds``)."""
@@ -47,6 +51,11 @@ class BakeResult:
     samples: list[dict]
     hierarchy_seconds: float | None = None
     reused_samples: int = 0  # samples a resumed or extended bake found complete instead of baking them
+
+    def __repr__(self) -> str:
+        kept = sum(int(x.get("vertices_kept", 0)) for x in self.samples) / max(len(self.samples), 1)
+        return (f"BakeResult({self.path!r}: {len(self.samples)} samples, SH order {self.sh_order}, "
+                f"{kept:,.0f} vertices kept per sample, bake {self.bake_seconds:.2f} s on {self.device})")
 
 
 @dataclasses.dataclass
@@ -154,7 +163,8 @@ def bake(
     overwrite: bool = False,
     jobs: int | None = None,
     hierarchy: bool = True,
-    threshold_deg: float | None = None,
+    threshold_deg: float | None = DEFAULT_THRESHOLD_DEG,
+    full: bool = False,
     tree=None,
     progress: Callable[[int, int], None] | None = None,
     hierarchy_progress: Callable[[int, int], None] | None = None,
@@ -170,8 +180,10 @@ def bake(
 ) -> BakeResult:
     """Bake light samples of ``scene`` and write the store at ``out``.
 
-    ``threshold_deg=None`` bakes every referenced vertex (full resolution); a number bakes, per sample, only the
-    vertices of the light-dependent cut with that incident-angle threshold (``lodprt.precompute.light_cut``; needs the hierarchy).
+    Per sample, only the vertices of the light-dependent cut with the incident-angle threshold ``threshold_deg``
+    (default 5 degrees, as ``lodprt bake``; ``lodprt.precompute.light_cut``; needs the hierarchy); ``full=True``
+    (or ``threshold_deg=None``) bakes every referenced vertex (full resolution, ``lodprt bake --full``), and so
+    does ``hierarchy=False`` with the default threshold (``--no-hierarchy``: no hierarchy, no light cut).
     With ``hierarchy`` the vertex hierarchy (``lodprt.model.hierarchy_build``) is built first (or ``tree`` is used) and
     stored under ``hierarchy/``; ``hierarchy_method`` picks its build (``build_hierarchy(method=...)``: "rounds",
     the default, or "pymeshlab"; docs/HIERARCHY.md).
@@ -188,6 +200,7 @@ def bake(
 
     gi = GISettings(bounces, bounce_threshold, gi_rays, indirect_threshold_deg)
     device = resolve_device(device)
+    threshold_deg = light_cut_threshold(threshold_deg, full=full, hierarchy=hierarchy)
     check_hierarchy(hierarchy, threshold_deg, hierarchy_method)
     check_sh_order(sh_order)
     codec = bake_codec(compress, *layout(scene, sh_order), out)
@@ -303,6 +316,15 @@ def compress_finished(out, codec, samples: list[dict]) -> list[dict]:
     from lodprt.store.compress import compress_store
 
     return compress_store(out, out, codec, overwrite=True, option="compress")["samples"]
+
+
+def light_cut_threshold(threshold_deg, *, full: bool, hierarchy: bool) -> float | None:
+    """The light cut's threshold a bake uses (None: full resolution): ``full``, ``threshold_deg=None`` or no
+    hierarchy with the default threshold mean full resolution; any other threshold is kept (and refused without
+    the hierarchy by ``check_hierarchy``)."""
+    if full or threshold_deg is None or (not hierarchy and threshold_deg == DEFAULT_THRESHOLD_DEG):
+        return None
+    return threshold_deg
 
 
 def check_hierarchy(hierarchy: bool, threshold_deg, method: str) -> None:

@@ -65,6 +65,24 @@ def as_camera(camera=None, **kw) -> Camera:
         raise LodprtError(f"set_camera: {exc}") from exc
 
 
+def camera_for(camera=None, *, eye=None, target=None, default_target=None, **fields) -> Camera:
+    """What ``set_camera`` takes: a ``Camera``, or its fields with the eye positional (``camera``) or ``eye=``;
+    ``target`` None is ``default_target`` (the scene's centre, as on the command line)."""
+    if isinstance(camera, Camera):
+        if eye is not None or target is not None:
+            raise LodprtError("set_camera: pass either a Camera or its fields (eye, target, ...), not both")
+        return camera
+    if camera is not None and eye is not None:
+        raise LodprtError("set_camera: the eye given twice (positional and eye=)")
+    eye = camera if eye is None else eye
+    if eye is None:
+        raise LodprtError("set_camera: give the eye (set_camera(eye=(x, y, z))) or a Camera")
+    target = default_target if target is None else target
+    if target is None:
+        raise LodprtError("set_camera: give the target (no scene centre to default to)")
+    return as_camera(eye, target=target, **fields)
+
+
 def view_projection(camera: Camera, bounds: np.ndarray) -> np.ndarray:
     """4x4 projection @ view of ``camera`` (OpenGL clip space), with the renderer's near and far planes
     (``lodprt.render.camera_matrices``) for the scene's bounds (2, 3): the cut culls with the planes that draw."""

@@ -30,7 +30,10 @@ class Frame:
     radiance (A, 3) float32 linear RGB radiance toward ``camera.eye`` (T-7 per vertex);
     lights (L, 3) float64 light positions as used (after clamping), light_colors (L, 3) float64 RGB intensities;
     camera the ``Camera``; stats a dict (triangles, active_nodes, nodes_touched, refined, coarsened, ms_cut,
-    ms_triangulate, ms_relight, ms_total, ...).
+    ms_triangulate, ms_relight, ms_total, ...);
+    white the radiance its source shows as white (the ``Runtime``'s or ``StoreFrames``' fixed white point, one for
+    every frame of the source, so that a sequence does not flicker; None for a frame made alone: the renderer then
+    picks one from the frame).
     """
 
     vertex_ids: np.ndarray
@@ -43,6 +46,11 @@ class Frame:
     light_colors: np.ndarray
     camera: Camera
     stats: dict
+    white: float | None = None
+
+    def __repr__(self) -> str:
+        return (f"Frame({len(self.positions):,} vertices, {len(self.triangles):,} triangles, {len(self.lights)} "
+                f"light(s), eye {None if self.camera is None else tuple(round(x, 4) for x in self.camera.eye)})")
 
 
 def display(radiance_over_white):
@@ -141,19 +149,26 @@ class StoreFrames:
 
     lod = False
 
-    def __init__(self, store, interpolation: str = DEFAULT_INTERPOLATION):
+    def __init__(self, store, interpolation: str = DEFAULT_INTERPOLATION, *, outside: str = "clamp"):
         self.store = store
         self.interpolation = interpolation
         self.white = None
         self.camera = None
+        #: lights outside the box are clamped here, once per set_lights (one warning for the source's life)
+        self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], outside=outside)
         self._lights = store.light_positions[store.num_samples // 2][None, :]
         self._colors = None
 
     def set_lights(self, positions, colors=None) -> None:
-        self._lights, self._colors = np.asarray(positions, np.float64).reshape(-1, 3), colors
+        self._lights, self._colors = self.interp.clamp(np.asarray(positions, np.float64).reshape(-1, 3))[0], colors
 
-    def set_camera(self, camera) -> None:
-        self.camera = camera
+    def set_camera(self, camera=None, target=None, *, eye=None, **fields) -> Camera:
+        """As ``Runtime.set_camera``: a ``Camera`` or its fields, the target defaulting to the scene's centre."""
+        from lodprt.runtime.camera import camera_for, scene_centre
+
+        centre = None if target is not None or isinstance(camera, Camera) else scene_centre(self.store)
+        self.camera = camera_for(camera, eye=eye, target=target, default_target=centre, **fields)
+        return self.camera
 
     def set_lod(self, enabled: bool) -> None:
         if enabled:
@@ -166,8 +181,9 @@ class StoreFrames:
         t0 = time.perf_counter()
         frame = full_frame(self.store, self.camera, lights=self._lights, colors=self._colors,
                            interpolation=self.interpolation)
-        if self.white is None:
+        if self.white is None:  # the first frame's, kept for every later frame
             self.white = auto_white(frame.radiance)
+        frame.white = self.white
         frame.stats["ms_total"] = 1e3 * (time.perf_counter() - t0)
         return frame
 

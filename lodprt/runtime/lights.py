@@ -15,7 +15,9 @@ weights), so that ``w -> 1`` smoothly as the light approaches a sample and the s
 When every distance equals ``r`` (all samples equidistant) the weights are equal.
 
 Outside the region (the light box of the bake), ``outside="clamp"`` (default) moves the light to the nearest point
-of the box and logs a warning once per call; ``outside="error"`` raises ``LodprtError``. Several lights: their
+of the box and logs a warning naming where it was moved, once per ``LightInterpolator`` (a light turning in and out
+of the box every frame is warned about once; ``clamped`` counts the lights moved); ``outside="error"`` raises
+``LodprtError`` naming the box. Several lights: their
 coefficients add (thesis 3.4.1), each scaled by its own RGB intensity (``Runtime``).
 """
 
@@ -52,23 +54,37 @@ class LightInterpolator:
         if outside not in ("clamp", "error"):
             raise LodprtError(f"light interpolation: outside {outside!r}; choose 'clamp' or 'error'")
         self.weighting, self.outside = weighting, outside
+        #: lights moved into the box so far (the warning is logged for the first only)
+        self.clamped = 0
         self.k = min(int(nearest), len(self.samples))
         extent = float(np.linalg.norm(self.hi - self.lo)) or float(np.abs(self.samples).max()) or 1.0
         self.tol = 1e-9 * extent  # "on the boundary" counts as inside
 
+    def box_text(self) -> str:
+        """The box as ``[xmin, ymin, zmin] - [xmax, ymax, zmax]``."""
+        return f"[{', '.join(f'{v:.4g}' for v in self.lo)}] - [{', '.join(f'{v:.4g}' for v in self.hi)}]"
+
     def clamp(self, lights) -> tuple[np.ndarray, np.ndarray]:
-        """(L, 3) positions moved into the box (or LodprtError with ``outside="error"``) and (L,) bool: moved."""
+        """(L, 3) positions moved into the box (or LodprtError with ``outside="error"``) and (L,) bool: moved. The
+        first light moved is warned about (where it was and where it went); later ones are counted in ``clamped``
+        and logged at debug level only."""
         x = np.asarray(lights, np.float64).reshape(-1, 3)
         if not np.isfinite(x).all():
             raise LodprtError(f"light position: expected finite numbers, got {x.tolist()}")
         out = (x < self.lo - self.tol).any(1) | (x > self.hi + self.tol).any(1)
+        moved = np.clip(x, self.lo, self.hi)
         if out.any():
-            where = ", ".join("(" + ", ".join(f"{v:.4g}" for v in p) + ")" for p in x[out])
-            box = f"[{', '.join(f'{v:.4g}' for v in self.lo)}] - [{', '.join(f'{v:.4g}' for v in self.hi)}]"
+            where = ", ".join(_xyz(p) for p in x[out])
             if self.outside == "error":
-                raise LodprtError(f"light {where} lies outside the sampled region {box}")
-            log.warning("light %s lies outside the sampled region %s: clamped to it", where, box)
-        return np.clip(x, self.lo, self.hi), out
+                raise LodprtError(f"light {where} lies outside the sampled region (light box) {self.box_text()}")
+            to = ", ".join(_xyz(p) for p in moved[out])
+            if not self.clamped:
+                log.warning("light %s lies outside the sampled region (light box) %s: clamped to %s (further lights "
+                            "outside it are clamped without another warning)", where, self.box_text(), to)
+            else:
+                log.debug("light %s clamped to %s", where, to)
+            self.clamped += int(out.sum())
+        return moved, out
 
     def weights(self, lights) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For (L, 3) lights: sample indices (L, k) int64, weights (L, k) float64 summing to 1 (T-12), and (L,) bool
@@ -97,6 +113,10 @@ class LightInterpolator:
         W = np.zeros((len(self.samples), 3))
         np.add.at(W, idx.ravel(), (w[:, :, None] * np.asarray(colors, np.float64)[:, None, :]).reshape(-1, 3))
         return W
+
+
+def _xyz(p) -> str:
+    return "(" + ", ".join(f"{v:.4g}" for v in p) + ")"
 
 
 def check_lights(positions, colors, intensity) -> tuple[np.ndarray, np.ndarray]:

@@ -50,7 +50,7 @@ class Relighting:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each);
         outside the sampled region clamped with a warning, or an error (``outside``)."""
         pos, col = check_lights(positions, colors, self.store.intensity)
-        pos, moved = self.interp.clamp(pos)  # warns (or refuses) once per call
+        pos, moved = self.interp.clamp(pos)  # refuses, or warns the first time a light is clamped
         idx, w, _ = self.interp.weights(pos)
         W = np.zeros((len(self.interp.samples), 3))
         np.add.at(W, idx.ravel(), (w[:, :, None] * col[:, None, :]).reshape(-1, 3))  # lights add (thesis 3.4.1)

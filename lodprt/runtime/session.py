@@ -25,7 +25,7 @@ import numpy as np
 from lodprt.errors import LodprtError
 from lodprt.runtime import node_bounds
 from lodprt.runtime import frame_error
-from lodprt.runtime.camera import Camera, as_camera, camera_jump, clip_planes, view_projection
+from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
 from lodprt.runtime.frames import Frame
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
@@ -182,6 +182,7 @@ class Runtime:
         self._stamp = np.full(h.num_nodes, -1, np.int64)
         self._refresh_all = True  # the next frame evaluates every candidate (set by jumps and new bounds)
         self.camera: Camera | None = None
+        self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
             self._node_bounds("detail" if criterion == "screen" else "box_centre")
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
@@ -334,14 +335,13 @@ class Runtime:
         self.sample_weights, self.used_samples, self.used_slots = W, lit.used_samples, lit.used_slots
 
     def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
-                   near=None, far=None) -> Camera:
-        """A ``Camera`` or its fields (``set_camera(eye, target, up, fov, width, height)``)."""
+                   near=None, far=None, *, eye=None) -> Camera:
+        """A ``Camera`` or its fields (the eye positional or ``eye=``); ``target`` None: the scene's centre, as the CLI."""
         old = self.camera
-        if isinstance(camera, Camera):
-            self.camera = camera
-        else:
-            self.camera = as_camera(camera, target=target, up=up, fov=fov, width=width, height=height,
-                                     near=near, far=far)
+        if self._centre is None and target is None and not isinstance(camera, Camera):
+            self._centre = scene_centre(self.store)
+        self.camera = camera_for(camera, eye=eye, target=target, default_target=self._centre, up=up, fov=fov,
+                                 width=width, height=height, near=near, far=far)
         self._dirty = True
         if old is None or camera_jump(old, self.camera, JUMP):
             self._refresh_all = True
@@ -547,7 +547,7 @@ class Runtime:
         return Frame(vertex_ids=vid, positions=np.take(self._pos32, vid, axis=0),
                      normals=np.take(self._nrm32, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
-                     light_colors=self.light_colors.copy(), camera=self.camera, stats=stats)
+                     light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
 
     def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, 3, ncoef) interpolated coefficients and (A, 3) radiance toward the eye of vertices ``vid``

@@ -55,6 +55,12 @@ class Store:
         self.codec = str(self.attrs.get("codec", "none")) if version == 2 else "none"
         self._cache: dict[str, np.ndarray] = {}
 
+    def __repr__(self) -> str:
+        mode = self.attrs.get("mode", "?")
+        cut = f" {self.attrs['threshold_deg']:g} deg" if self.attrs.get("threshold_deg") is not None else ""
+        return (f"Store({str(self.path)!r}: {self.num_vertices:,} vertices, {self.num_samples} light samples, "
+                f"SH order {self.sh_order}, {mode}{cut}, codec {self.codec})")
+
     def read(self, name: str, *, cache: bool = True) -> np.ndarray:
         """Array ``name`` as written; kept on this Store unless ``cache`` is False (a light sample's rows: a store
         of many samples is read one sample at a time, its memory does not grow with the samples read)."""
@@ -109,6 +115,12 @@ class Store:
     @property
     def num_samples(self) -> int:
         return int(self.root["lights/positions"].shape[0])
+
+    @property
+    def light_box(self) -> np.ndarray:
+        """(6,) float64 the sampled light region (xmin, ymin, zmin, xmax, ymax, zmax): lights between samples are
+        interpolated inside it, clamped into it (or refused) outside."""
+        return np.asarray(self.root["lights"].attrs["box"], np.float64)
 
     @property
     def intensity(self) -> np.ndarray:
@@ -257,6 +269,7 @@ class Store:
         out["vertices"] = self.num_vertices
         out["faces"] = int(self.root["scene/faces"].shape[0])
         out["lights"] = dict(self.root["lights"].attrs)
+        out["light_box"] = [float(x) for x in self.light_box]
         out["samples"] = samples
         if self.has_hierarchy:
             g = self.root["hierarchy"]

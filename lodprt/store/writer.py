@@ -88,9 +88,9 @@ def check_destination(path: str | os.PathLike, *, overwrite: bool, format: str =
             raise StoreError(f"{path}: the folder {path.parent} does not exist")
         return
     if not overwrite:
-        raise StoreError(f"{path}: already exists; pass --overwrite (overwrite=True) to replace it")
+        raise StoreError(f"{path}: already exists; pass overwrite=True to replace it")
     if store_format(path) != format:
-        raise StoreError(f"{path}: exists and is not a {what}; refusing to replace it even with --overwrite")
+        raise StoreError(f"{path}: exists and is not a {what}; refusing to replace it even with overwrite=True")
 
 
 # -- leftovers of interrupted bakes ------------------------------------------------------------------------------
