@@ -8,19 +8,10 @@ import pytest
 import trimesh
 
 from lodprt.errors import LodprtError
+from test_view_cut import grid_plane
 
 #: sample cell spacing of the scenes below: a 3 x 1 x 3 grid over a 0.6-wide box
 BOX = (-0.3, 1.4, -0.3, 0.3, 1.6, 0.3)
-
-
-def grid_plane(n: int, size: float) -> trimesh.Trimesh:
-    """An n x n vertex grid in the y = 0 plane, side ``size``, centred on the origin, facing +y."""
-    t = np.linspace(-size / 2, size / 2, n)
-    x, z = np.meshgrid(t, t, indexing="ij")
-    v = np.c_[x.ravel(), np.zeros(n * n), z.ravel()]
-    i = np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]
-    a, b, c, d = i.ravel(), i.ravel() + n, i.ravel() + n + 1, i.ravel() + 1
-    return trimesh.Trimesh(v, np.r_[np.c_[a, d, c], np.c_[a, c, b]], process=False)
 
 
 def bake_grid(folder, objects: dict, *, ks=0.0, shininess=8.0, kd="0.6", threshold=5.0, order=4,
