@@ -149,7 +149,3 @@ class DirectLight:
             threads(kdirect.direct_light, A, inputs, outputs)
         return int(rays.numpy().sum())
 
-
-def slots_of(idx: np.ndarray, slot_of_sample) -> np.ndarray:
-    """(L, K) int32 cache slots of the (L, K) sample indices ``idx`` (``slot_of_sample``: sample -> slot)."""
-    return np.vectorize(lambda s: slot_of_sample[int(s)], otypes=[np.int32])(idx) if idx.size else idx.astype(np.int32)

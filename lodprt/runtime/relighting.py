@@ -60,21 +60,23 @@ class Relighting:
         self.used_samples = np.flatnonzero(np.abs(W).sum(1) > 0)
         self.used_slots = self.samples.ensure(self.used_samples)  # completes the samples not held yet (T-15)
 
+    def slot_of_sample(self) -> np.ndarray:
+        """(S,) int32 the cache slot holding each light sample in use, -1 for the others."""
+        slot = np.full(len(self.interp.samples), -1, np.int32)
+        slot[self.used_samples] = self.used_slots
+        return slot
+
     def light_slots(self) -> np.ndarray:
         """(L, k) int32 the cache slot of each light's samples, -1 where the sample has no weight: the samples whose
         visibility decides the light's ("direct-agree" M-3, "direct-blend" M-4)."""
-        slot = np.full(len(self.interp.samples), -1, np.int32)
-        slot[self.used_samples] = self.used_slots
-        return np.where(self.light_weights > 0, slot[self.light_samples], -1).astype(np.int32)
+        return np.where(self.light_weights > 0, self.slot_of_sample()[self.light_samples], -1).astype(np.int32)
 
     def bracket_mask(self) -> np.ndarray:
         """(slots,) int32: 1 for the cache slots of the samples around each light (``bracketing``), whose S-2
         detail the direct path's view cut takes at full weight (M-5)."""
         mask = np.zeros(max(self.samples.slots, 1), np.int32)
         near = bracketing(self.interp.samples, self.positions, self.light_samples, self.light_weights)
-        slot = np.full(len(self.interp.samples), -1, np.int64)
-        slot[self.used_samples] = self.used_slots
-        chosen = slot[self.light_samples[near]]
+        chosen = self.slot_of_sample()[self.light_samples[near]]
         mask[chosen[chosen >= 0]] = 1
         return mask
 
