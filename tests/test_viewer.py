@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from lodprt.runtime.camera import Camera
-from lodprt.display.viewer import Slider, Viewer, ViewerState, slider_layout
+from lodprt.display.viewer import SLIDER_ROW, Slider, Viewer, ViewerState, slider_layout
+from lodprt.runtime.session import DEFAULT_ERROR_BOUND
 
 
 def state():
@@ -261,8 +262,12 @@ def test_viewer_starts_draws_and_closes_under_xvfb(cut_store, xvfb, tmp_path):
     assert (img[100:, :].max(2) > 60).mean() > 0.2  # the lit floor and bunny fill the lower part
     corner = img[:30, :120]
     assert (corner > 240).all(2).any() and (corner < 60).all(2).mean() > 0.5  # white text on its dark box
-    eb, al = slider_layout(240, 180)
-    x, y, w, h = (int(c) for c in al.rect)
+    # the default screen criterion shows its one knob, the error bound (0.8 on a 0..1 track), in the bottom row
+    (eb,) = slider_layout(240, 180, alpha=False)
+    x, y, w, h = (int(c) for c in eb.rect)
     track = img[y + 4:y + h - 4, x + 2:x + w - 2].astype(int)
     filled = (track[..., 0] > 230) & (track[..., 1] > 180) & (track[..., 2] < 90)  # the slider's amber fill
-    assert 0.5 < filled.mean(0).astype(bool).mean() < 0.7  # alpha 0.6: the fill covers 60% of the track
+    share = filled.mean(0).astype(bool).mean()
+    assert abs(share - eb.fraction(DEFAULT_ERROR_BOUND["screen"])) < 0.05, share
+    above = img[y - SLIDER_ROW + 4:y - 4, x + 2:x + w - 2].astype(int)  # no alpha slider above it
+    assert not ((above[..., 0] > 230) & (above[..., 1] > 180) & (above[..., 2] < 90)).any()
