@@ -102,7 +102,7 @@ def main():
     rows, occluded = [], {}
     for g in sizes + [sizes[-2]]:
         refl = len(rows) == len(sizes)
-        res = bake_neighbourhood(both, "object", None, grid=(g, g, g), margin=1.0, order=3, rays=args.rays,
+        res = bake_neighbourhood(both, "object", None, grid=(g, g, g), margin=1.0, sh_order=3, rays=args.rays,
                                  reflection=refl, bounces=1 if refl else 0, device=device)
         store = InMemory(res)
         rad, inside = N.receiver_radiance(store, lighting, pp, nrm, np.full(3, 0.8))

@@ -14,13 +14,13 @@ Public API (everything else may change)::
         png = r.image(frame)                          # (H, W, 3) uint8 sRGB; linear=True: float32 radiance
 
     env = lodprt.load_environment("sky")              # or a lat-long .hdr/.exr/.npy, a cube map (docs/ENVIRONMENT.md)
-    lodprt.bake_transfer(scene, "env.zarr", order=3, mode="interreflected", environment=env)
+    lodprt.bake_transfer(scene, "env.zarr", sh_order=3, mode="interreflected", environment=env)
     rgb = lodprt.relit_radiance(lodprt.open_transfer("env.zarr"), env.project(3), eye=(0, 0.5, 1))  # (V, 3)
 
     lodprt.export_glb(store, "lit.glb", sample=0, eye=(0, 0.5, 1))  # mesh, COLOR_0, _SH_i (docs/EXPORT.md)
 
     vol = lodprt.load_volume("cloud")                 # or a .npy density grid + bounds (docs/VOLUMES.md)
-    lodprt.bake_volume(vol, "cloud.zarr", order=3, rays=128, bounces=2)
+    lodprt.bake_volume(vol, "cloud.zarr", sh_order=3, rays=128, bounces=2)
     lodprt.bake_neighbourhood(scene, "bunny", "near.zarr", grid=(16, 16, 16))   # transfer around one object
 
 Names are imported on first use, so ``import lodprt`` stays cheap (Warp loads only when a kernel is needed).

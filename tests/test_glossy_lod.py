@@ -30,7 +30,7 @@ def scene_and_tree():
 def full_bake(scene_and_tree, tmp_path_factory):
     scene, _ = scene_and_tree
     out = tmp_path_factory.mktemp("glossy-lod") / "full.zarr"
-    T.bake_transfer(scene, out, order=3, mode="shadowed", rays=256, device="cpu", jobs=1)
+    T.bake_transfer(scene, out, sh_order=3, mode="shadowed", rays=256, device="cpu", jobs=1)
     return relight.open_transfer(out)
 
 
@@ -49,7 +49,7 @@ def test_cut_store_keeps_exact_matrices_and_relights_close(scene_and_tree, full_
     full-resolution bake."""
     scene, tree = scene_and_tree
     out = tmp_path / "lod.zarr"
-    res = T.bake_transfer(scene, out, order=3, mode="shadowed", rays=256, device="cpu", jobs=1, lod_threshold=0.2,
+    res = T.bake_transfer(scene, out, sh_order=3, mode="shadowed", rays=256, device="cpu", jobs=1, lod_threshold=0.2,
                           tree=tree)
     lod = relight.open_transfer(out)
     ids_full, m_full = full_bake.glossy()
@@ -75,7 +75,7 @@ def test_threshold_zero_equals_the_full_bake(scene_and_tree, full_bake, tmp_path
     them from ring neighbours, so the diffuse part matches only where those agree.)"""
     scene, tree = scene_and_tree
     out = tmp_path / "lod0.zarr"
-    T.bake_transfer(scene, out, order=3, mode="shadowed", rays=256, device="cpu", jobs=1, lod_threshold=0.0, tree=tree)
+    T.bake_transfer(scene, out, sh_order=3, mode="shadowed", rays=256, device="cpu", jobs=1, lod_threshold=0.0, tree=tree)
     lod = relight.open_transfer(out)
     L = E.procedural("spots", resolution=16).project(3)
     assert np.array_equal(lod.read("transfer/glossy_kept_ids"), full_bake.glossy()[0])

@@ -123,7 +123,7 @@ def test_sphere_shadow_on_plane_matches_shadowed_bake():
     t0 = diffuse_transfer(Geometry.from_scene(bare, device="cpu"), order=3, mode="shadowed", rays=256).transfer
     r1, r0 = np.einsum("vci,ci->vc", t1, lighting), np.einsum("vci,ci->vc", t0, lighting)
     dark_ref = r0 - r1
-    res = bake_neighbourhood(scene, "ball", None, grid=(16, 16, 16), margin=1.8, order=3, rays=256,
+    res = bake_neighbourhood(scene, "ball", None, grid=(16, 16, 16), margin=1.8, sh_order=3, rays=256,
                              reflection=False, device="cpu")
     nrm = np.tile([0.0, 1.0, 0.0], (len(pp), 1))
     got, inside = N.receiver_radiance(Grid(res), lighting, pp, nrm, np.full(3, KD))
@@ -148,7 +148,7 @@ def test_reflected_light_lies_between_occlusion_and_no_object():
     nrm = np.tile([0.0, 1.0, 0.0], (len(pp), 1))
     out = {}
     for refl in (False, True):
-        res = bake_neighbourhood(scene, "ball", None, grid=(8, 8, 8), margin=1.8, order=3, rays=128,
+        res = bake_neighbourhood(scene, "ball", None, grid=(8, 8, 8), margin=1.8, sh_order=3, rays=128,
                                  reflection=refl, bounces=0, device="cpu")
         out[refl], _ = N.receiver_radiance(Grid(res), white, pp, nrm, np.full(3, KD))
     under = np.linalg.norm(pp[:, [0, 2]], axis=1) < 0.3

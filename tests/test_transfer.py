@@ -298,7 +298,7 @@ def test_bake_store_and_relight(device, tmp_path):
     scene = small_scene()
     env = E.procedural("spots", resolution=16)
     out = tmp_path / "ball.zarr"
-    res = T.bake_transfer(scene, out, order=3, mode="interreflected", rays=64, bounces=2, environment=env, device=device)
+    res = T.bake_transfer(scene, out, sh_order=3, mode="interreflected", rays=64, bounces=2, environment=env, device=device)
     store = relight.open_transfer(out)
     assert store.attrs["format"] == "lodprt-transfer" and store.attrs["mode"] == "interreflected"
     assert np.array_equal(store.read("transfer/diffuse"), res.diffuse.transfer)
@@ -313,10 +313,10 @@ def test_bake_store_and_relight(device, tmp_path):
     floor = scene.object_id == 1
     assert np.array_equal(rad[floor], diffuse[floor]) and (rad[ids] != diffuse[ids]).any()
     with pytest.raises(LodprtError, match="already exists"):
-        T.bake_transfer(scene, out, order=2, rays=8, device=device)
+        T.bake_transfer(scene, out, sh_order=2, rays=8, device=device)
     (tmp_path / "other").mkdir()
     with pytest.raises(LodprtError, match="not a lodprt transfer store"):
-        T.bake_transfer(scene, tmp_path / "other", order=2, rays=8, device=device, overwrite=True)
+        T.bake_transfer(scene, tmp_path / "other", sh_order=2, rays=8, device=device, overwrite=True)
 
 
 def test_cli_bake_and_render_environment(tmp_path, capsys, gl):
@@ -405,7 +405,7 @@ def test_lod_store_completes_on_reading(ball_lod, tmp_path):
     """A bake with lod_threshold stores only the cut's vectors and the hierarchy; reading completes the rest."""
     scene, t, tree = ball_lod
     out = tmp_path / "lod.zarr"
-    res = T.bake_transfer(scene, out, order=3, mode="shadowed", rays=256, glossy=False, lod_threshold=0.05, tree=tree,
+    res = T.bake_transfer(scene, out, sh_order=3, mode="shadowed", rays=256, glossy=False, lod_threshold=0.05, tree=tree,
                           device="cpu")
     store = relight.open_transfer(out)
     assert store.attrs["vertices_kept"] == len(res.cut_nodes) < scene.num_vertices

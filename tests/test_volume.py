@@ -141,7 +141,7 @@ def test_volume_store_round_trip(tmp_path):
     vol = procedural_volume("cloud:8")
     env = procedural("sky", resolution=16)
     out = tmp_path / "c.zarr"
-    res = bake_volume(vol, out, order=2, rays=8, bounces=1, environment=env, device="cpu")
+    res = bake_volume(vol, out, sh_order=2, rays=8, bounces=1, environment=env, device="cpu")
     store = open_volume(out)
     assert np.array_equal(store.transfer(), res.transfer.transfer)
     assert np.array_equal(store.volume().density, vol.density)
@@ -151,10 +151,10 @@ def test_volume_store_round_trip(tmp_path):
     j = source_radiance(store.transfer(), lighting)
     assert np.allclose(j[1, 2, 3], (store.transfer()[1, 2, 3] * lighting).sum(-1), rtol=1e-5)
     with pytest.raises(LodprtError, match="already exists"):
-        bake_volume(vol, out, order=2, rays=8, bounces=0, device="cpu")
+        bake_volume(vol, out, sh_order=2, rays=8, bounces=0, device="cpu")
     (tmp_path / "x.txt").write_text("mine")
     with pytest.raises(LodprtError, match="not a lodprt volume store"):
-        bake_volume(vol, tmp_path / "x.txt", order=2, rays=8, bounces=0, device="cpu", overwrite=True)
+        bake_volume(vol, tmp_path / "x.txt", sh_order=2, rays=8, bounces=0, device="cpu", overwrite=True)
     with pytest.raises(LodprtError, match="not a lodprt volume store"):
         open_volume(tmp_path / "x.txt")
 

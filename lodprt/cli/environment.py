@@ -197,8 +197,8 @@ def bake_environment(scene_path, out, *, environment: str | None = None, sh_orde
     scene = load_scene(scene_path)
     print(f"scene {scene.source}: {scene.num_vertices:,} vertices, {len(scene.faces):,} triangles", file=sys.stderr)
     with ProgressBars() as bars:
-        res = bake_transfer(scene, out, order=sh_order, mode=transfer, rays=rays, bounces=bounces,
-                            threshold=bounce_threshold, glossy=glossy, glossy_order=glossy_order, rotate=rotate_rays,
+        res = bake_transfer(scene, out, sh_order=sh_order, mode=transfer, rays=rays, bounces=bounces,
+                            bounce_threshold=bounce_threshold, glossy=glossy, glossy_order=glossy_order, rotate=rotate_rays,
                             environment=env, device=device, lod_threshold=lod_threshold, overwrite=overwrite,
                             progress=bars.callback("transfer", "pass"), jobs=jobs)
     e = res.diffuse.energy

@@ -125,8 +125,8 @@ def cmd_bake_volume(args) -> int:
     print(f"volume {vol.source}: {' x '.join(map(str, vol.shape))} voxels, box {vol.lo.tolist()} .. {vol.hi.tolist()}, "
           f"albedo {vol.albedo.tolist()}", file=sys.stderr)
     with ProgressBars() as bars:
-        res = bake_volume(vol, args.out, order=args.sh_order, rays=args.rays, bounces=args.bounces,
-                          threshold=args.bounce_threshold, step=args.step, rotate=args.rotate_rays, environment=env,
+        res = bake_volume(vol, args.out, sh_order=args.sh_order, rays=args.rays, bounces=args.bounces,
+                          bounce_threshold=args.bounce_threshold, step=args.step, rotate=args.rotate_rays, environment=env,
                           device=device, overwrite=args.overwrite, progress=bars.callback("volume", "pass"),
                           jobs=args.jobs)
     t = res.transfer
@@ -175,7 +175,7 @@ def cmd_bake_neighbourhood(args) -> int:
     env = load_environment(args.environment) if args.environment else None
     with ProgressBars() as bars:
         res = bake_neighbourhood(scene, args.object, args.out, grid=tuple(args.grid), margin=args.margin,
-                                 order=args.sh_order, transferred_order=args.transferred_order, rays=args.rays,
+                                 sh_order=args.sh_order, transferred_order=args.transferred_order, rays=args.rays,
                                  reflection=not args.no_reflection, bounces=args.bounces, environment=env,
                                  device=device, overwrite=args.overwrite, progress=bars.callback("grid", "pass"),
                                  jobs=args.jobs)

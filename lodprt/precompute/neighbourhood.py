@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.devices import launch_ranges, resolve_device, warp
+from lodprt.deprecation import renamed_arguments
 from lodprt.errors import LodprtError
 from lodprt.precompute.transfer import Geometry, diffuse_transfer, fibonacci_directions
 from lodprt.store.neighbourhood_store import prepare_neighbourhood_destination, write_neighbourhood_store
@@ -135,31 +136,32 @@ class NeighbourhoodBake:
     grid_seconds: float = 0.0  # the matrices alone (the rest of ``seconds`` is O's own transfer)
 
 
-def bake_neighbourhood(scene, object_name: str, out, *, grid=(16, 16, 16), margin: float = 1.0, order: int = 3,
+@renamed_arguments(order="sh_order")
+def bake_neighbourhood(scene, object_name: str, out, *, grid=(16, 16, 16), margin: float = 1.0, sh_order: int = 3,
                        transferred_order: int | None = None, rays: int = 256, reflection: bool = True,
                        bounces: int = 1, rotate: bool = False, seed: int = 0, environment=None,
                        device: str | None = None, overwrite: bool = False, progress=None,
                        jobs: int | None = None) -> NeighbourhoodBake:
     """Bake O's self-transfer and the grid's matrices (N-1, N-2); write a ``lodprt-neighbourhood`` store to ``out``
-    (None: only return them). ``transferred_order`` defaults to ``order``."""
+    (None: only return them). ``transferred_order`` defaults to ``sh_order``."""
     shape = check_grid(grid)
-    transferred_order = order if transferred_order is None else transferred_order
+    transferred_order = sh_order if transferred_order is None else transferred_order
     device = resolve_device(device)
     if out is not None:
         prepare_neighbourhood_destination(out, overwrite=overwrite)
     t0 = time.perf_counter()
     pos, faces, normals, kd = object_mesh(scene, object_name)
     geom = Geometry.from_arrays(pos, faces, normals, kd, device=device)
-    own = diffuse_transfer(geom, order=order, mode="interreflected" if bounces else "shadowed", rays=rays,
+    own = diffuse_transfer(geom, order=sh_order, mode="interreflected" if bounces else "shadowed", rays=rays,
                            bounces=bounces, rotate=rotate, seed=seed, jobs=jobs).transfer
     if progress:
         progress(1, 2)
     lo, hi = neighbourhood_box(pos, margin)
     pts = grid_points(lo, hi, shape)
     t_grid = time.perf_counter()
-    m = transfer_matrices(pos, faces, pts, order=order, transferred_order=transferred_order, rays=rays,
+    m = transfer_matrices(pos, faces, pts, order=sh_order, transferred_order=transferred_order, rays=rays,
                           object_transfer=own if reflection else None, rotate=rotate, seed=seed, device=device,
-                          jobs=jobs).reshape(shape + (3, transferred_order**2, order**2))
+                          jobs=jobs).reshape(shape + (3, transferred_order**2, sh_order**2))
     if progress:
         progress(2, 2)
     seconds = time.perf_counter() - t0
@@ -167,13 +169,13 @@ def bake_neighbourhood(scene, object_name: str, out, *, grid=(16, 16, 16), margi
                             time.perf_counter() - t_grid)
     if out is None:
         return res
-    env = None if environment is None else environment.stored(order)
+    env = None if environment is None else environment.stored(sh_order)
     arrays = {"object/positions": pos.astype(np.float32), "object/normals": normals.astype(np.float32),
               "object/faces": faces, "object/albedo": kd.astype(np.float32), "object/transfer": own}
     res.path = write_neighbourhood_store(
         Path(out), overwrite=overwrite, matrices=m, arrays=arrays, environment=env,
         attrs=dict(source=str(scene.source), object=object_name, grid=list(shape), lo=lo.tolist(), hi=hi.tolist(),
-                   margin=float(margin), sh_order=int(order), transferred_order=int(transferred_order),
+                   margin=float(margin), sh_order=int(sh_order), transferred_order=int(transferred_order),
                    rays=int(rays), directions="spherical-fibonacci", rotate_per_point=bool(rotate), seed=int(seed),
                    reflection=bool(reflection), object_bounces=int(bounces), bake_seconds=float(seconds),
                    grid_seconds=float(res.grid_seconds),

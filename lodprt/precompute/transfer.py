@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.devices import launch_ranges, load_kernels, resolve_device, warp
+from lodprt.deprecation import renamed_arguments
 from lodprt.errors import LodprtError
 from lodprt.model import sh
 from lodprt.model.scene import bounds_offset, ray_offset, referenced_bounds
@@ -383,8 +384,9 @@ class TransferBake:
     glossy_kept_ids: np.ndarray | None = None
 
 
-def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", rays: int = 256, bounces: int = 4,
-                  threshold: float = 1e-3, glossy: bool = True, glossy_order: int | None = None,
+@renamed_arguments(order="sh_order", threshold="bounce_threshold")
+def bake_transfer(scene, out, *, sh_order: int = 3, mode: str = "interreflected", rays: int = 256, bounces: int = 4,
+                  bounce_threshold: float = 1e-3, glossy: bool = True, glossy_order: int | None = None,
                   glossy_mode: str = "shadowed", rotate: bool = False, seed: int = 0, environment=None,
                   lod_threshold: float | None = None, tree=None, device: str | None = None, overwrite: bool = False,
                   progress=None, jobs: int | None = None) -> TransferBake:
@@ -403,11 +405,11 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
     t_load = load_kernels(device, *transfer_kernels())
     t0 = time.perf_counter()
     geom = Geometry.from_scene(scene, device=device)
-    diffuse = diffuse_transfer(geom, order=order, mode=mode, rays=rays, bounces=bounces, threshold=threshold,
+    diffuse = diffuse_transfer(geom, order=sh_order, mode=mode, rays=rays, bounces=bounces, threshold=bounce_threshold,
                                rotate=rotate, seed=seed, progress=progress, jobs=jobs)
     ks = np.array([m.ks for m in scene.materials])
     gids = np.nonzero(geom.referenced & (ks[scene.material_id] > 0))[0].astype(np.int32) if glossy else np.zeros(0, np.int32)
-    gorder = glossy_order or order
+    gorder = glossy_order or sh_order
     cut_nodes = None
     hierarchy_seconds = None
     gkept = gids  # the glossy vertices whose matrices are baked and stored
@@ -420,26 +422,26 @@ def bake_transfer(scene, out, *, order: int = 3, mode: str = "interreflected", r
         hierarchy_seconds = time.perf_counter() - t_h
         cut_nodes = transfer_cut(tree, diffuse.transfer, lod_threshold)
         gkept = np.intersect1d(gids, tree.vertex[cut_nodes]).astype(np.int32)  # the rest is completed (T-15)
-    gmat = glossy_transfer(geom, gkept, order=gorder, lighting_order=order, rays=rays, mode=glossy_mode,
+    gmat = glossy_transfer(geom, gkept, order=gorder, lighting_order=sh_order, rays=rays, mode=glossy_mode,
                            rotate=rotate, seed=seed, jobs=jobs) if len(gkept) else None
     seconds = time.perf_counter() - t0 - (hierarchy_seconds or 0.0)
     result = TransferBake(None, diffuse, gids, gmat, seconds, t_load, device, cut_nodes, tree, gkept)
     if out is None:
         return result
-    env = None if environment is None else environment.stored(order)
+    env = None if environment is None else environment.stored(sh_order)
     result.path = write_transfer_store(
         Path(out), scene, overwrite=overwrite, diffuse=diffuse.transfer, glossy_ids=gids, glossy=gmat,
         glossy_kept_ids=gkept if cut_nodes is not None else None, cut_nodes=cut_nodes, tree=tree, hierarchy_seconds=hierarchy_seconds, environment=env,
         attrs=dict(
             source=str(scene.source),
-            sh_order=int(order),
+            sh_order=int(sh_order),
             mode=mode,
             rays=int(rays),
             directions="spherical-fibonacci",
             rotate_per_vertex=bool(rotate),
             seed=int(seed),
             bounces=len(diffuse.energy) - 1,
-            bounce_threshold=float(threshold),
+            bounce_threshold=float(bounce_threshold),
             pass_energy=[float(e) for e in diffuse.energy],
             glossy_order=int(gorder) if gmat is not None else None,
             glossy_mode=glossy_mode if gmat is not None else None,

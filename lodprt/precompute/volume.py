@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.devices import launch_ranges, load_kernels, resolve_device, warp
+from lodprt.deprecation import renamed_arguments
 from lodprt.errors import LodprtError
 from lodprt.precompute.transfer import fibonacci_directions
 from lodprt.store.volume_store import prepare_volume_destination, write_volume_store
@@ -186,7 +187,8 @@ class VolumeBake:
     device: str
 
 
-def bake_volume(volume, out, *, order: int = 3, rays: int = 128, bounces: int = 2, threshold: float = 1e-3,
+@renamed_arguments(order="sh_order", threshold="bounce_threshold")
+def bake_volume(volume, out, *, sh_order: int = 3, rays: int = 128, bounces: int = 2, bounce_threshold: float = 1e-3,
                 step: float | None = None, rotate: bool = False, seed: int = 0, environment=None,
                 device: str | None = None, overwrite: bool = False, progress=None, jobs: int | None = None) -> VolumeBake:
     """Bake the volume's transfer vectors and write a ``lodprt-volume`` store to ``out`` (None: only return them).
@@ -199,17 +201,17 @@ def bake_volume(volume, out, *, order: int = 3, rays: int = 128, bounces: int = 
         prepare_volume_destination(out, overwrite=overwrite)
     t_load = load_kernels(device, *volume_kernels())
     grid = VolumeGrid(volume, device=device, step=step)
-    res = volume_transfer(grid, order=order, rays=rays, bounces=bounces, threshold=threshold, rotate=rotate,
+    res = volume_transfer(grid, order=sh_order, rays=rays, bounces=bounces, threshold=bounce_threshold, rotate=rotate,
                           seed=seed, progress=progress, jobs=jobs)
     bake = VolumeBake(None, res, t_load, device)
     if out is None:
         return bake
-    env = None if environment is None else environment.stored(order)
+    env = None if environment is None else environment.stored(sh_order)
     bake.path = write_volume_store(
         Path(out), volume, overwrite=overwrite, transfer=res.transfer, environment=env,
-        attrs=dict(source=str(volume.source), sh_order=int(order), rays=int(rays), directions="spherical-fibonacci",
+        attrs=dict(source=str(volume.source), sh_order=int(sh_order), rays=int(rays), directions="spherical-fibonacci",
                    rotate_per_voxel=bool(rotate), seed=int(seed), phase="isotropic", step=float(res.step),
-                   bounces=len(res.energy) - 1, bounce_threshold=float(threshold),
+                   bounces=len(res.energy) - 1, bounce_threshold=float(bounce_threshold),
                    pass_energy=[float(e) for e in res.energy], bake_seconds=float(res.seconds),
                    load_seconds=float(t_load), device=device))
     return bake
