@@ -4,7 +4,8 @@ A benchmark script measures the lodprt (and ``lodprt.kernels``) modules it impor
 modules, and its own helper scripts in ``benchmarks/`` (``common.py``, ``table1.py``, ...). The files are found by
 reading the imports (every ``import`` statement, function-level ones included, and the code of string constants a
 script runs in a child process, e.g. ``python -c BAKE_CHILD``), not by running anything, so the fingerprint is a
-function of the source tree alone: a docs edit, a test or a module the benchmark never imports does not change it.
+function of the source tree alone: a docs edit (docstrings and comments included), a test or a module the benchmark
+never imports does not change it.
 The package's ``__init__`` modules on the way to an imported module count (they run on import). This file and the
 report scripts do not count: they measure nothing.
 """
@@ -85,12 +86,25 @@ def code_files(script: Path, root: Path = REPO) -> list[Path]:
     return sorted(files)
 
 
+def code_text(source: str) -> str:
+    """What of a Python source the fingerprint hashes: its syntax tree without docstrings (comments are not in
+    the tree), so that editing documentation in a module does not make results stale, while any code does."""
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body \
+                and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                and isinstance(body[0].value.value, str):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree)
+
+
 def file_hashes(files: list[Path], root: Path = REPO) -> dict[str, str]:
-    """{path relative to root (posix): sha256 of its bytes, first 16 hex digits}."""
+    """{path relative to root (posix): sha256 of its code (``code_text``), first 16 hex digits}."""
     out = {}
     for f in files:
         rel = Path(f).resolve().relative_to(root.resolve()).as_posix()
-        out[rel] = hashlib.sha256(Path(f).read_bytes()).hexdigest()[:16]
+        out[rel] = hashlib.sha256(code_text(Path(f).read_text()).encode()).hexdigest()[:16]
     return dict(sorted(out.items()))
 
 

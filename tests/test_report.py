@@ -75,18 +75,28 @@ def test_fingerprint_covers_what_the_benchmark_imports(tmp_path):
     assert files == {"benchmarks/bench.py", "benchmarks/helper.py", "lodprt/__init__.py", "lodprt/a.py",
                      "lodprt/unused.py", "kernels/__init__.py", "kernels/k.py"}
     fp, hashes = fingerprint.code_fingerprint(script, tmp_path)
-    assert hashes["kernels/k.py"] == hashlib.sha256(b"y = 2\n").hexdigest()[:16]
+    tree = "Module(body=[Assign(targets=[Name(id='y', ctx=Store())], value=Constant(value=2))], type_ignores=[])"
+    assert hashes["kernels/k.py"] == hashlib.sha256(tree.encode()).hexdigest()[:16]
     assert len(fp) == 16
 
 
-@pytest.mark.parametrize("rel, changes", [("kernels/k.py", True), ("lodprt/a.py", True), ("benchmarks/helper.py", True),
-                                          ("docs/X.md", False), ("README.md", False)])
-def test_fingerprint_changes_with_source_not_docs(tmp_path, rel, changes):
+@pytest.mark.parametrize("rel, edit, changes", [
+    ("kernels/k.py", "w = 0\n", True), ("lodprt/a.py", "w = 0\n", True), ("benchmarks/helper.py", "w = 0\n", True),
+    ("kernels/k.py", "# a comment\n", False), ("docs/X.md", "more\n", False), ("README.md", "more\n", False)])
+def test_fingerprint_changes_with_code_not_docs(tmp_path, rel, edit, changes):
     script = make_tree(tmp_path)
     before, _ = fingerprint.code_fingerprint(script, tmp_path)
-    (tmp_path / rel).write_text((tmp_path / rel).read_text() + "# edited\n")
+    (tmp_path / rel).write_text((tmp_path / rel).read_text() + edit)
     after, _ = fingerprint.code_fingerprint(script, tmp_path)
     assert (after != before) == changes
+
+
+def test_fingerprint_ignores_docstrings_but_not_string_code():
+    code = 'def f(x):\n    return x + 1\n'
+    documented = '"""Module doc."""\n\n\ndef f(x):\n    """What f does."""\n    return x + 1  # T-7\n'
+    assert fingerprint.code_text(code) == fingerprint.code_text(documented)
+    assert fingerprint.code_text(code) != fingerprint.code_text(code.replace("+ 1", "+ 2"))
+    assert fingerprint.code_text('X = "a"\n') != fingerprint.code_text('X = "b"\n')  # a constant, not a docstring
 
 
 def test_stale_results_are_named_with_the_changed_files(tmp_path):
