@@ -11,6 +11,7 @@ import json
 import re
 import struct
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -471,3 +472,37 @@ def test_turntable_mp4_without_the_extra(stores, tmp_path, capsys, monkeypatch):
     rc, _, err = run(["turntable", stores["rgb"], "--frames", 2, "-o", out], capsys)
     assert rc == 2 and "pip install 'lodprt[video]'" in err and err.count("\n") == 1
     assert not out.exists() and not list(tmp_path.iterdir())
+
+
+#: where .ci/run installs the Khronos glTF validator (``npm install --prefix .ci/node gltf-validator``)
+VALIDATOR = Path(__file__).resolve().parents[1] / ".ci" / "node" / "node_modules" / "gltf-validator"
+VALIDATE_JS = """
+const fs = require('fs'), v = require(process.argv[1]);
+v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])), {maxIssues: 100})
+  .then((r) => console.log(JSON.stringify(r.issues)))
+  .catch((e) => { console.error(String(e)); process.exit(2); });
+"""
+
+
+@pytest.mark.parametrize("name, full", [("rgb", False), ("grey-nohier", True)])
+def test_khronos_validator_reports_nothing(stores, tmp_path, capsys, name, full):
+    """The Khronos glTF validator (the npm package, installed by .ci/run) reports 0 errors, warnings, infos and
+    hints on an exported .glb with a camera, two KHR_lights_punctual lights and the SH extras."""
+    import shutil
+    import subprocess
+
+    node = shutil.which("node")
+    if node is None or not VALIDATOR.is_dir():
+        pytest.skip("the Khronos glTF validator is not installed (.ci/run: npm install --prefix .ci/node "
+                    "gltf-validator)")
+    out = tmp_path / "v.glb"
+    argv = ["export", stores[name], "--eye", *EYE, "--light", 0.1, 0.9, 0.1, "--light", -0.2, 0.95, 0.0,
+            "--outside", "error", "-o", out] + (["--full"] if full else [])
+    rc, _, err = run(argv, capsys)
+    assert rc == 0, err
+    res = subprocess.run([node, "-e", VALIDATE_JS, str(VALIDATOR), str(out)], capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    issues = json.loads(res.stdout)
+    counts = {k: issues[k] for k in ("numErrors", "numWarnings", "numInfos", "numHints")}
+    assert counts == {"numErrors": 0, "numWarnings": 0, "numInfos": 0, "numHints": 0}, issues["messages"]
