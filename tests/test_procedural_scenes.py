@@ -1,0 +1,139 @@
+"""benchmarks/procedural.py: the procedural and decimated scenes the view-cut benchmark measures besides the three
+shared models -- closed and wound outward where the shape is closed, the triangle counts, the same arrays from the
+same seed, scene files lodprt loads, and fins that really are thin."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import procedural  # noqa: E402
+
+#: object triangles per scene, from the construction (``procedural.grid_box``: 4 (nx ny + ny nz + nx nz))
+EXPECTED = {
+    "comb": 4 * (32 * 2 + 2 * 16 + 32 * 16) + procedural.COMB_FINS * 4 * (1 * 24 + 24 * 24 + 1 * 24),
+    "relief": 20 * 4 ** 5,
+    "crowd": 8 * 20 * 4 ** 3 + 8 * 4 * 3 * 36 + 8 * 2 * 48 * 16,
+    "terrain": 4 * (100 * 1 + 1 * 100 + 100 * 100),
+    "speck": 2 * 160 * 32,
+}
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return {name: procedural.scene_meshes(name, seed=0) for name in procedural.SCENES}
+
+
+def edges_manifold(faces: np.ndarray) -> bool:
+    """Every undirected edge in exactly two faces, and every directed edge in one (consistent winding)."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    undirected = np.sort(directed, axis=1)
+    _, counts = np.unique(undirected, axis=0, return_counts=True)
+    _, dcounts = np.unique(directed, axis=0, return_counts=True)
+    return bool((counts == 2).all() and (dcounts == 1).all())
+
+
+def signed_volume(pos: np.ndarray, faces: np.ndarray) -> float:
+    a, b, c = pos[faces[:, 0]], pos[faces[:, 1]], pos[faces[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6)
+
+
+@pytest.mark.parametrize("name", procedural.CLOSED)
+def test_closed_scenes_are_watertight_and_wound_outward(scenes, name):
+    import trimesh
+
+    for obj, pos, faces in scenes[name]["objects"]:
+        assert edges_manifold(faces), obj
+        assert trimesh.Trimesh(pos, faces, process=False).is_watertight, obj
+        # closed and outward: the signed volume is positive (each part of the comb on its own, too)
+        assert signed_volume(pos, faces) > 0, obj
+        # the ground contact: every object stands on y = 0
+        assert pos[:, 1].min() == pytest.approx(0.0, abs=1e-12), obj
+
+
+def test_comb_parts_are_each_closed_and_outward(scenes):
+    import trimesh
+
+    _, pos, faces = scenes["comb"]["objects"][0]
+    parts = trimesh.Trimesh(pos, faces, process=False).split(only_watertight=False)
+    assert len(parts) == procedural.COMB_FINS + 1
+    assert all(p.is_watertight and p.volume > 0 for p in parts)
+
+
+@pytest.mark.parametrize("name", list(EXPECTED))
+def test_triangle_counts(scenes, name):
+    assert sum(len(f) for _, _, f in scenes[name]["objects"]) == EXPECTED[name]
+
+
+def test_every_scene_is_small_enough_to_bake_in_seconds(scenes):
+    for name, spec in scenes.items():
+        tris = sum(len(f) for _, _, f in spec["objects"])
+        assert 5_000 < tris <= procedural.MAX_TRIANGLES, name
+    assert sum(len(f) for _, _, f in scenes["comb"]["objects"]) >= 20_000  # "tens of thousands"
+    assert len(scenes["crowd"]["objects"]) == procedural.CROWD_OBJECTS
+
+
+def test_bunny_coarse_is_a_quarter_of_the_bunny_and_outward(scenes):
+    from lodprt.model.scene import load_mesh
+
+    _, faces = load_mesh(REPO / "tests" / "data" / "stanford-bunny.obj.xz")
+    _, pos, coarse = scenes["bunny-coarse"]["objects"][0]
+    assert abs(len(coarse) - len(faces) // 4) <= 0.01 * len(faces)
+    assert signed_volume(pos, coarse) > 0  # open (holes in its base) but wound outward
+
+
+def test_fins_are_thin(scenes):
+    """Every fin is a box exactly FIN_WIDTH thick along x, under 4% of its height (0.7 to 1 FIN_HEIGHT) and 40 times
+    thinner than deep."""
+    _, pos, faces = scenes["comb"]["objects"][0]
+    base_top = procedural.COMB_BASE[1]
+    fin = pos[:, 1] > base_top + 1e-9  # vertices above the base belong to fins only
+    bx = procedural.COMB_BASE[0]
+    pitch = bx / (procedural.COMB_FINS + 1)
+    slot = np.rint((pos[fin, 0] + bx / 2) / pitch).astype(int)
+    assert sorted(set(slot.tolist())) == list(range(1, procedural.COMB_FINS + 1))
+    for k in range(1, procedural.COMB_FINS + 1):
+        x = pos[fin][slot == k]
+        width = x[:, 0].max() - x[:, 0].min()
+        height = x[:, 1].max() - (base_top - 0.01)
+        assert width == pytest.approx(procedural.FIN_WIDTH, rel=1e-9)
+        assert width < 0.04 * height
+        assert width * 40 <= x[:, 2].max() - x[:, 2].min()
+    assert procedural.FIN_WIDTH / procedural.FIN_HEIGHT == pytest.approx(0.025)
+
+
+def test_sizes_spread_in_the_crowd_and_the_speck_is_small(scenes):
+    extents = [np.ptp(pos, axis=0).max() for _, pos, _ in scenes["crowd"]["objects"]]
+    assert max(extents) / min(extents) > 10
+    _, pos, _ = scenes["speck"]["objects"][0]
+    assert np.ptp(pos, axis=0).max() < 0.06
+    assert scenes["speck"]["floor"][1] >= 10  # the floor reaches many object sizes beyond it
+
+
+def test_same_seed_same_arrays_other_seed_other_arrays():
+    for name in ("comb", "relief", "crowd", "terrain", "speck"):
+        a, b = procedural.scene_meshes(name, seed=3), procedural.scene_meshes(name, seed=3)
+        for (na, pa, fa), (nb, pb, fb) in zip(a["objects"], b["objects"], strict=True):
+            assert na == nb
+            np.testing.assert_array_equal(pa, pb)
+            np.testing.assert_array_equal(fa, fb)
+        c = procedural.scene_meshes(name, seed=4)
+        assert any(not np.array_equal(pa, pc) for (_, pa, _), (_, pc, _) in zip(a["objects"], c["objects"]))
+
+
+@pytest.mark.parametrize("name", ["comb", "crowd", "speck"])
+def test_scene_files_load(tmp_path, name):
+    from lodprt.model.scene import load_scene
+
+    spec = procedural.scene_meshes(name)
+    scene = load_scene(procedural.write_scene(name, tmp_path, seed=0))
+    tris = sum(len(f) for _, _, f in spec["objects"])
+    resolution = spec["floor"][0]
+    assert len(scene.faces) == tris + 2 * (resolution - 1) ** 2
+    verts = sum(len(p) for _, p, _ in spec["objects"])
+    np.testing.assert_allclose(np.asarray(scene.positions)[:verts], np.concatenate(
+        [p for _, p, _ in spec["objects"]]), atol=1e-6 * 4)
