@@ -137,3 +137,53 @@ def test_scene_files_load(tmp_path, name):
     verts = sum(len(p) for _, p, _ in spec["objects"])
     np.testing.assert_allclose(np.asarray(scene.positions)[:verts], np.concatenate(
         [p for _, p, _ in spec["objects"]]), atol=1e-6 * 4)
+
+
+def test_view_cut_scene_selection():
+    from argparse import Namespace
+
+    import view_cut
+
+    def names(**kw):
+        return view_cut.scene_names(Namespace(**{"quick": False, "scenes": None, "only": None, **kw}))
+
+    assert names() == (list(view_cut.MODELS_USED), list(procedural.SCENES))
+    assert names(quick=True) == (["stanford-bunny"], [])
+    assert names(scenes="procedural") == ([], list(procedural.SCENES))
+    assert names(scenes="shared") == (list(view_cut.MODELS_USED), [])
+    assert names(only=["comb", "spot"]) == (["spot"], ["comb"])
+    with pytest.raises(SystemExit):
+        names(only=["nonesuch"])
+
+
+def static_row(scene, family, view, criterion, psnr, fewer):
+    return {"scene": scene, "family": family, "view": view, "criterion": f"{criterion} (bound 0.8)",
+            "triangles": round(1000 / fewer), "full": 1000, "fewer": fewer, "psnr_db": psnr,
+            "estimated_psnr_db": float("nan")}
+
+
+def test_static_summary_and_its_tables():
+    import report_tables
+    import view_cut
+
+    rows = [static_row("spot", "shared", "front", "screen", 41.0, 6.0),
+            static_row("spot", "shared", "front", "thesis", 25.0, 60.0),
+            static_row("comb", "procedural", "front", "screen", 33.5, 9.0),
+            static_row("comb", "procedural", "default eye", "screen", 39.0, 3.5),
+            static_row("comb", "procedural", "front", "thesis", 20.0, 50.0),
+            static_row("comb", "procedural", "default eye", "thesis", 22.0, 40.0)]
+    summary = view_cut.static_summary(rows)
+    assert [s["criterion"] for s in summary] == ["screen", "thesis"]
+    screen = summary[0]
+    assert (screen["rows"], screen["worst_psnr_db"], screen["least_fewer"]) == (3, 33.5, 3.5)
+    assert summary[1]["worst_psnr_db"] == 20.0 and summary[1]["least_fewer"] == 40.0
+    assert screen["worst_psnr_at"] == "comb, front" and screen["least_fewer_at"] == "comb, default eye"
+    r = {"floor": 200, "static_views": rows, "static_summary": summary}
+    shared = report_tables.view_cut_static(r)
+    assert "spot + 200" in shared and "comb" not in shared
+    made = report_tables.view_cut_procedural(r)
+    assert "| comb | front |" in made and "spot" not in made
+    assert "33.5 dB | comb, front" in report_tables.view_cut_summary(r)
+    old = {"floor": 200, "static_views": rows[:2]}  # results from before the procedural scenes
+    assert report_tables.view_cut_procedural(old) == report_tables.NOT_MEASURED
+    assert report_tables.view_cut_summary(old) == report_tables.NOT_MEASURED
