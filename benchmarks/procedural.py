@@ -225,9 +225,13 @@ def write_obj(path: Path, pos: np.ndarray, faces: np.ndarray) -> None:
 
 def write_scene(name: str, out: str | Path, seed: int = 0) -> Path:
     """Write scene ``name`` (its ``.obj`` files and ``NAME.toml``) into ``out``; returns the TOML path."""
+    return write_spec(name, scene_meshes(name, seed), out)
+
+
+def write_spec(name: str, spec: dict, out: str | Path) -> Path:
+    """Write the scene ``spec`` (what ``scene_meshes`` returns) as ``out/NAME.toml`` and its ``.obj`` files."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    spec = scene_meshes(name, seed)
     toml = []
     for obj, pos, faces in spec["objects"]:
         write_obj(out / f"{obj}.obj", pos, faces)
@@ -246,9 +250,10 @@ def main(argv=None) -> None:
     p.add_argument("--only", nargs="+", choices=list(SCENES), default=list(SCENES), metavar="NAME")
     args = p.parse_args(argv)
     for name in args.only:
-        path = write_scene(name, args.out, args.seed)
-        tris = sum(len(f) for _, _, f in scene_meshes(name, args.seed)["objects"])
-        print(f"{path}: {tris:,} object triangles")
+        spec = scene_meshes(name, args.seed)
+        path = write_spec(name, spec, args.out)
+        tris = sum(len(f) for _, _, f in spec["objects"])
+        print(f"{path}: {tris:,} object triangles in {len(spec['objects'])} object(s)")
 
 
 if __name__ == "__main__":

@@ -187,3 +187,9 @@ def test_static_summary_and_its_tables():
     old = {"floor": 200, "static_views": rows[:2]}  # results from before the procedural scenes
     assert report_tables.view_cut_procedural(old) == report_tables.NOT_MEASURED
     assert report_tables.view_cut_summary(old) == report_tables.NOT_MEASURED
+
+
+def test_the_script_writes_the_scene_files(tmp_path, capsys):
+    procedural.main([str(tmp_path), "--only", "speck", "relief"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["relief.obj", "relief.toml", "speck.obj", "speck.toml"]
+    assert "10,240 object triangles" in capsys.readouterr().out
