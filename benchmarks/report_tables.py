@@ -62,14 +62,17 @@ def _scene_label(scene: str, floor) -> str:
     return f"{'bunny' if scene == 'stanford-bunny' else scene} + {floor}"
 
 
-def view_cut_static(r: dict) -> str:
+def static_table(r: dict, family: str, label) -> str:
+    """The static views of one scene family (rows without ``family`` are the shared models'), ``label(scene)``
+    naming each scene."""
     views = {}
     for v in r["static_views"]:
-        views.setdefault((v["scene"], v["view"]), {})[v["criterion"].split()[0]] = v
+        if v.get("family", "shared") == family:
+            views.setdefault((v["scene"], v["view"]), {})[v["criterion"].split()[0]] = v
     rows = []
     for (scene, view), by in views.items():
         s, t, e = by["screen"], by["thesis"], by.get("target")
-        rows.append([_scene_label(scene, r["floor"]), view, f"{n(s['triangles'])} / {n(s['full'])}",
+        rows.append([label(scene), view, f"{n(s['triangles'])} / {n(s['full'])}",
                      g(s["fewer"], 2), f"{s['psnr_db']:.1f} dB", n(t["triangles"]), f"{t['psnr_db']:.1f} dB"]
                     + ([] if e is None else [g(e["fewer"], 2), f"{e['psnr_db']:.1f} dB",
                                              f"{e['estimated_psnr_db']:.1f} dB"]))
@@ -77,6 +80,30 @@ def view_cut_static(r: dict) -> str:
     if any("target" in by for by in views.values()):  # results with benchmarks/view_cut.py's TARGET_PSNR rows
         head += ["target: x fewer", "measured", "estimated (E-3)"]
     return md(head, rows)
+
+
+def view_cut_static(r: dict) -> str:
+    return static_table(r, "shared", lambda scene: _scene_label(scene, r["floor"]))
+
+
+#: what a table of the procedural scenes reads before a run has measured them
+NOT_MEASURED = "Not measured yet: run `python benchmarks/view_cut.py` (the full run measures the procedural scenes too)."
+
+
+def view_cut_procedural(r: dict) -> str:
+    """The static views on benchmarks/procedural.py's scenes (each on its own floor)."""
+    if not any(v.get("family") == "procedural" for v in r["static_views"]):
+        return NOT_MEASURED
+    return static_table(r, "procedural", str)
+
+
+def view_cut_summary(r: dict) -> str:
+    """Per criterion, the worst PSNR and the least "x fewer" over every scene (both families) and view."""
+    if "static_summary" not in r:
+        return NOT_MEASURED
+    rows = [[s["criterion"], s["rows"], f"{s['worst_psnr_db']:.1f} dB", s["worst_psnr_at"],
+             g(s["least_fewer"], 2), s["least_fewer_at"]] for s in r["static_summary"]]
+    return md(["criterion", "views", "worst PSNR", "at", "least x fewer", "at"], rows)
 
 
 def view_cut(r: dict) -> str:
@@ -272,6 +299,8 @@ def moving_lights_mitsuba(r: dict) -> str:
 TABLES = {
     "render": ("render", render),
     "view_cut_static": ("view_cut", view_cut_static),
+    "view_cut_procedural": ("view_cut", view_cut_procedural),
+    "view_cut_summary": ("view_cut", view_cut_summary),
     "view_cut": ("view_cut", view_cut),
     "runtime": ("runtime", runtime),
     "runtime_sweep": ("runtime", runtime_sweep),

@@ -2,6 +2,7 @@
 sweeps, on each test model standing on a floor.
 
     python benchmarks/view_cut.py [--quick] [--json PATH] [--device cpu|cuda] [--floor N] [--frames N]
+                                  [--scenes shared|procedural|all] [--only NAME ...]
 
 Scenes: the bunny, spot and fandisk, each on an N x N floor (default 200; quick: 60, bunny only), 3 x 1 x 3
 light samples in the default box, SH order 4, light cut at 5 degrees (the bake's defaults). Per criterion and bound:
@@ -13,6 +14,14 @@ relit along the same orbit (LOD off). Writes ``benchmarks/results/view_cut.json`
 against time, one panel per scene). Also, per scene, both criteria at their defaults and the screen criterion
 steered to a target PSNR, from two fixed views with the cut converged (``static_views``: triangles against the full
 mesh, PSNR, and the target's estimated PSNR E-3 beside the measured one).
+
+``--scenes procedural`` (or ``all``, the default of the full run) also measures the static views on the procedural
+and decimated scenes of ``benchmarks/procedural.py`` (thin fins, fine relief, a crowd of sizes, terrain, a speck on
+a wide floor, the decimated bunny; seed 0, each with its own floor), generated into the run's temporary folder;
+the orbit sweeps stay on the shared models. Every static row names its scene and ``family`` (``shared`` or
+``procedural``); ``static_summary`` gives, per criterion, the worst PSNR and the least "x fewer" over every scene
+and view (the issue's bar: at least 35 dB with at least 4x fewer triangles). ``--quick`` is the bunny alone
+unless ``--scenes`` says otherwise; ``--only NAME ...`` keeps only the named scenes (a smoke test of one).
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+import procedural
 from common import environment, model, parser, plot_path, table, write
 
 SWEEPS = {"screen": (0.2, 0.35, 0.5, 0.7, 1.0, 1.4), "thesis": (0.1, 0.2, 0.25, 0.315, 0.4)}
@@ -41,6 +51,31 @@ def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
     path = folder / f"{name}.zarr"
     bake(load_scene(toml), path, sh_order=4, device=device, threshold_deg=5.0)
     return path
+
+
+def bake_procedural(name: str, folder: Path, device: str) -> Path:
+    """Generate procedural scene ``name`` (seed 0, its own floor) into ``folder`` and bake it as ``bake_scene``."""
+    from lodprt.model.scene import load_scene
+    from lodprt.precompute.bake import bake
+
+    toml = procedural.write_scene(name, folder / name, seed=0)
+    path = folder / f"{name}.zarr"
+    bake(load_scene(toml), path, sh_order=4, device=device, threshold_deg=5.0)
+    return path
+
+
+def static_summary(static: list[dict]) -> list[dict]:
+    """Per criterion (its name without the bound), the worst PSNR and the least "x fewer" over every static row,
+    with the scene and view where each occurs."""
+    out = []
+    for criterion in dict.fromkeys(r["criterion"].split(" (bound")[0] for r in static):
+        mine = [r for r in static if r["criterion"].split(" (bound")[0] == criterion]
+        worst = min(mine, key=lambda r: r["psnr_db"])
+        least = min(mine, key=lambda r: r["fewer"])
+        out.append({"criterion": criterion, "rows": len(mine), "worst_psnr_db": worst["psnr_db"],
+                    "worst_psnr_at": f"{worst['scene']}, {worst['view']}", "least_fewer": least["fewer"],
+                    "least_fewer_at": f"{least['scene']}, {least['view']}"})
+    return out
 
 
 def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
@@ -68,7 +103,7 @@ def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
     return out
 
 
-def static_views(store, name: str, renderer, device: str) -> list[dict]:
+def static_views(store, name: str, renderer, device: str, family: str = "shared") -> list[dict]:
     """Both criteria at their defaults and the screen criterion steered to TARGET_PSNR, cut converged, light on the
     middle sample, 400 x 300, from the default eye of ``lodprt compare`` (``default_eye``: a three-quarter view from
     the front and above) and from a closer front view of the object (the full frame made once per view): triangles
@@ -98,7 +133,8 @@ def static_views(store, name: str, renderer, device: str) -> list[dict]:
             full = fulls[view]
             numbers = frame_error(renderer, lod, full, rt.white)[0]
             est = lod.stats.get("estimated_psnr_db")  # E-3, made only under a target_psnr
-            out.append({"scene": name, "view": view, "criterion": f"{criterion} (bound {rt.error_bound:.3g})",
+            out.append({"scene": name, "family": family, "view": view,
+                        "criterion": f"{criterion} (bound {rt.error_bound:.3g})",
                         "triangles": len(lod.triangles), "full": len(full.triangles),
                         "fewer": len(full.triangles) / max(len(lod.triangles), 1), "psnr_db": numbers["psnr_db"],
                         "estimated_psnr_db": float("nan") if est is None else float(est)})
@@ -107,10 +143,44 @@ def static_views(store, name: str, renderer, device: str) -> list[dict]:
     return out
 
 
+def scene_names(args) -> tuple[list[str], list[str]]:
+    """The shared models (orbits and static views) and the procedural scenes (static views) this run measures."""
+    which = args.scenes or ("shared" if args.quick else "all")
+    shared = list(MODELS_USED[:1] if args.quick else MODELS_USED) if which in ("shared", "all") else []
+    made = list(procedural.SCENES) if which in ("procedural", "all") else []
+    if args.only:
+        unknown = set(args.only) - set(MODELS_USED) - set(procedural.SCENES)
+        if unknown:
+            raise SystemExit(f"--only: unknown scene(s) {', '.join(sorted(unknown))}")
+        shared = [n for n in MODELS_USED if n in args.only]
+        made = [n for n in procedural.SCENES if n in args.only]
+    return shared, made
+
+
+def procedural_static(names, folder: Path, renderer, device: str) -> list[dict]:
+    """The static views on each procedural scene (no orbit sweeps: they are slow)."""
+    from lodprt.store.bake_store import open_store
+
+    static = []
+    for name in names:
+        t = time.perf_counter()
+        store = open_store(bake_procedural(name, folder, device))
+        print(f"{name} (procedural): {store.num_vertices:,} vertices, {len(store.faces):,} triangles "
+              f"(baked in {time.perf_counter() - t:.0f} s)", flush=True)
+        static += static_views(store, name, renderer, device, family="procedural")
+    return static
+
+
 def main():
     p = parser(__doc__.splitlines()[0])
-    p.add_argument("--floor", type=int, default=None, help="floor resolution (default 200; quick 60)")
+    p.add_argument("--floor", type=int, default=None, help="floor resolution of the shared models (default 200; "
+                   "quick 60); the procedural scenes keep their own")
     p.add_argument("--frames", type=int, default=None, help="orbit frames (default 96; quick 16)")
+    p.add_argument("--scenes", choices=("shared", "procedural", "all"), default=None,
+                   help="the shared models (orbits and static views), the procedural scenes of "
+                   "benchmarks/procedural.py (static views), or both (default: all; quick: the bunny alone)")
+    p.add_argument("--only", nargs="+", metavar="NAME", default=None,
+                   help="keep only these scenes (shared or procedural names; a smoke test)")
     args = p.parse_args()
     from lodprt.devices import resolve_device
     from lodprt.display.render import Renderer
@@ -120,7 +190,7 @@ def main():
     device = resolve_device(args.device)
     floor = args.floor or (60 if args.quick else 200)
     frames = args.frames or (16 if args.quick else 96)
-    names = MODELS_USED[:1] if args.quick else MODELS_USED
+    names, made = scene_names(args)
     sweeps = {k: v[1:4:2] for k, v in SWEEPS.items()} if args.quick else SWEEPS
     rows, static = [], []
     with tempfile.TemporaryDirectory(prefix="lodprt-view-cut-") as tmp, Renderer() as renderer:
@@ -141,20 +211,35 @@ def main():
                                  "speedup": full["median_ms"] / r["median_ms"]})
                     print(f"  {criterion} {bound:g}: {r['median_triangles']:,.0f} tri, {r['median_ms']:.1f} ms "
                           f"(full {full['median_ms']:.1f}), PSNR {r['median_psnr_db']:.1f} dB", flush=True)
-    print()
-    print(table(rows, [("scene", "scene", "s"), ("criterion", "criterion", "s"), ("error_bound", "bound", ".3g"),
-                       ("median_triangles", "triangles", ",.0f"), ("median_ms", "median ms", ".1f"),
-                       ("p95_ms", "p95 ms", ".1f"), ("speedup", "vs full", ".2f"),
-                       ("median_psnr_db", "PSNR dB", ".1f"), ("min_psnr_db", "worst dB", ".1f")]))
-    print()
-    print(table(static, [("scene", "scene", "s"), ("view", "view", "s"), ("criterion", "criterion (default)", "s"),
-                         ("triangles", "triangles", ",.0f"), ("full", "full", ",.0f"), ("fewer", "x fewer", ".1f"),
-                         ("psnr_db", "PSNR dB", ".1f"), ("estimated_psnr_db", "estimated dB (E-3)", ".1f")]))
+        static += procedural_static(made, Path(tmp), renderer, device)
+    summary = static_summary(static)
+    print_tables(rows, static, summary)
     name = "view_cut" + ("-quick" if args.quick else "")
     print("wrote", write(name, {"benchmark": "view_cut", "quick": args.quick, "environment": environment(device),
-                                "floor": floor, "frames": frames, "rows": rows, "static_views": static},
-                                args.json))
-    plot(rows, names, name)
+                                "floor": floor, "frames": frames, "rows": rows, "static_views": static,
+                                "static_summary": summary}, args.json))
+    if rows:
+        plot(rows, names, name)
+
+
+def print_tables(rows: list[dict], static: list[dict], summary: list[dict]) -> None:
+    if rows:
+        print()
+        print(table(rows, [("scene", "scene", "s"), ("criterion", "criterion", "s"),
+                           ("error_bound", "bound", ".3g"), ("median_triangles", "triangles", ",.0f"),
+                           ("median_ms", "median ms", ".1f"), ("p95_ms", "p95 ms", ".1f"),
+                           ("speedup", "vs full", ".2f"), ("median_psnr_db", "PSNR dB", ".1f"),
+                           ("min_psnr_db", "worst dB", ".1f")]))
+    print()
+    print(table(static, [("scene", "scene", "s"), ("family", "family", "s"), ("view", "view", "s"),
+                         ("criterion", "criterion (default)", "s"), ("triangles", "triangles", ",.0f"),
+                         ("full", "full", ",.0f"), ("fewer", "x fewer", ".1f"), ("psnr_db", "PSNR dB", ".1f"),
+                         ("estimated_psnr_db", "estimated dB (E-3)", ".1f")]))
+    print()
+    print("over every scene and view:")
+    print(table(summary, [("criterion", "criterion", "s"), ("rows", "views", "d"),
+                          ("worst_psnr_db", "worst PSNR dB", ".1f"), ("worst_psnr_at", "at", "s"),
+                          ("least_fewer", "least x fewer", ".1f"), ("least_fewer_at", "at", "s")]))
 
 
 def plot(rows: list[dict], names, name: str) -> None:
