@@ -44,3 +44,90 @@ def test_cli_compare(cut_store, tmp_path, capsys):
     assert "PSNR" in capsys.readouterr().out and out.is_file()
     assert main(args) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+LIGHTS = [(0.05, 0.3, 0.1)]
+
+
+def _camera(w=160, h=120):
+    from lodprt.runtime.camera import Camera
+
+    return Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), width=w, height=h)
+
+
+def test_compare_error_is_difference_over_runtime_white(cut_store, tmp_path):
+    """compare's numbers are |LOD - full| / white of the two linear renders (`render_to_file` to .npy, LOD on and
+    off), computed here in numpy, with white the Runtime's fixed white of the store; the figure is laid out pixel
+    for pixel: its size is the layout's, and its middle panel is the full-resolution PNG of `render_to_file`."""
+    from PIL import Image
+
+    from lodprt.display.compare import compare_figure
+    from lodprt.display.error_figure import TITLE, layout
+    from lodprt.display.pictures import render_to_file
+    from lodprt.runtime.samples import default_white
+    from lodprt.store.bake_store import open_store
+
+    store, cam = open_store(cut_store), _camera()
+    got = compare_figure(store, tmp_path / "c.png", lights=LIGHTS, camera=cam, error_bound=0.5)
+    for name, lod in (("lod", True), ("full", False)):
+        render_to_file(store, tmp_path / f"{name}.npy", lights=LIGHTS, camera=cam, error_bound=0.5, lod=lod)
+        render_to_file(store, tmp_path / f"{name}.png", lights=LIGHTS, camera=cam, error_bound=0.5, lod=lod)
+    a, b = (np.load(tmp_path / f"{n}.npy").astype(np.float64) for n in ("lod", "full"))
+    white = default_white(store)
+    assert got["white"] == pytest.approx(white, rel=1e-12)
+    covered = (a.max(2) > 0) | (b.max(2) > 0)
+    rel = (np.abs(a - b).sum(2) / 3 / white)[covered]
+    assert rel.max() > 0
+    assert got["max_difference"] == pytest.approx(rel.max(), rel=1e-6)
+    assert got["mean_difference"] == pytest.approx(rel.mean(), rel=1e-6)
+    assert got["p99_difference"] == pytest.approx(np.percentile(rel, 99), rel=1e-6)
+    mse = np.mean((np.clip(a, None, white) - np.clip(b, None, white))[covered] ** 2) / white**2
+    assert got["psnr_db"] == pytest.approx(-10 * np.log10(mse), abs=1e-6)
+    fig = np.asarray(Image.open(tmp_path / "c.png").convert("RGB"))
+    assert (fig.shape[1], fig.shape[0]) == layout(160, 120)["size"]
+    x = layout(160, 120)["panels"][1][0]
+    full_png = np.asarray(Image.open(tmp_path / "full.png").convert("RGB"))
+    assert np.array_equal(fig[TITLE + 30:, x:x + 160], full_png[30:])  # below the panel's own title
+
+
+def test_panels_fill_the_figure():
+    """The three panels cover most of the figure (the rest: a two-line title and the colour bar)."""
+    from lodprt.display.error_figure import layout
+
+    for (w, h), least in (((320, 240), 0.8), ((640, 480), 0.88)):
+        fw, fh = layout(w, h)["size"]
+        assert 3 * w * h / (fw * fh) > least
+
+
+class _Linear:
+    """A stand-in renderer whose linear image of a frame is the frame (an array) itself, as one row of pixels."""
+
+    def image(self, frame, *, linear, per_vertex=False):
+        assert linear
+        return np.asarray(frame, np.float32)[None]
+
+
+def test_diff_error_is_difference_over_white_as_compare(cut_store, tmp_path):
+    """diff's per-vertex error is |cut - full| / white of the completed light cut and the full re-bake, computed
+    here in numpy, white the Runtime's fixed white; compare's `frame_error` gives the same numbers on the same
+    pair; the colour scale tops at the 99th percentile, and --scale below zero is refused."""
+    from lodprt.display.compare import frame_error
+    from lodprt.display.diff import diff_figure, full_resolution_radiance
+    from lodprt.errors import LodprtError
+    from lodprt.runtime.samples import default_white
+    from lodprt.store.bake_store import open_store
+
+    store, eye = open_store(cut_store), np.array([0.05, 0.3, 0.45])
+    got = diff_figure(store, 0, eye, tmp_path / "d.png", size=(120, 90))
+    cut = store.radiance(0, eye).astype(np.float32)
+    full = full_resolution_radiance(store, 0, eye, "cpu").astype(np.float32)
+    white = default_white(store)
+    rel = np.abs(cut.astype(np.float64) - full).mean(1) / white
+    assert got["white"] == pytest.approx(white, rel=1e-12)
+    np.testing.assert_allclose(got["error"], rel, rtol=1e-5, atol=1e-9)
+    assert got["max_difference"] == pytest.approx(rel.max(), rel=1e-5) and rel.max() > 0
+    same, _, _ = frame_error(_Linear(), cut, full, white)
+    for key in ("psnr_db", "relative_rmse", "mean_difference", "max_difference", "p99_difference"):
+        assert same[key] == pytest.approx(got[key], rel=1e-5), key
+    with pytest.raises(LodprtError, match="--scale"):
+        diff_figure(store, 0, eye, tmp_path / "e.png", size=(120, 90), scale=-1.0)

@@ -46,7 +46,7 @@ def _add_diff(sub) -> None:
     cli_args.add_sample(d, required=True)
     cli_args.add_camera(d, size=(640, 480), size_what="each panel's size in pixels")
     cli_args.add_output(d, "diff.png", "output .png")
-    d.add_argument("--scale", type=float, default=None, metavar="S", help="error that maps to the top of the colour scale (default: the largest)")
+    d.add_argument("--scale", type=float, default=None, metavar="S", help="|difference| / white at the top of the colour scale (default: its 99th percentile)")
     cli_args.add_device(d, " for the full-resolution re-bake")
     d.set_defaults(handler=cmd_diff)
 
@@ -80,7 +80,7 @@ def _add_compare(sub) -> None:
     )
     _add_view_args(cp, "fig.png|fig.exr")
     cp.add_argument("--scale", type=float, default=None, metavar="S",
-                    help="difference (relative to white) at the top of the colour scale (default: its 99.5th percentile)")
+                    help="|difference| / white at the top of the colour scale (default: its 99th percentile)")
     cp.set_defaults(handler=cmd_compare)
 
 
@@ -150,8 +150,8 @@ def cmd_diff(args) -> int:
     store.check_sample(args.sample)
     numbers = diff_figure(store, args.sample, args.eye, out, target=args.target, size=tuple(args.size), fov=args.fov,
                           device=resolve_device(args.device), scale=args.scale)
-    print(f"wrote {out}: relative RMSE {numbers['relative_rmse']:.4f}, max {numbers['relative_max']:.4f}, "
-          f"{numbers['vertices_kept']:,} vertices kept")
+    print(f"wrote {out}: PSNR {numbers['psnr_db']:.1f} dB, relative RMSE {numbers['relative_rmse']:.4f}, max "
+          f"|cut - full| / white {numbers['max_difference']:.4f}, {numbers['vertices_kept']:,} vertices kept")
     return 0
 
 

@@ -24,44 +24,35 @@ def full_resolution_radiance(store: Store, sample: int, eye, device: str) -> np.
 
 
 def diff_figure(store: Store, sample: int, eye, out_png, *, target=None, size=(640, 480), fov=40.0, device="cpu",
-                scale: float | None = None) -> dict:
-    """Write a PNG with three panels (cut, full, |cut - full| in false colour with its scale); returns the numbers."""
-    import matplotlib
+                scale: float | None = None, white: float | None = None) -> dict:
+    """Write a PNG with three panels (cut, full, |cut - full| / white in false colour with its scale); returns the
+    numbers in its title (``error_figure.error_numbers`` over the vertices either radiance lights, as ``compare``
+    over pixels), ``white`` and ``error``: the per-vertex |cut - full| averaged over RGB, over white (V,).
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    ``white`` (default the run time's fixed white, ``lodprt.runtime.samples.default_white``, as renders and
+    ``compare`` use) both tone-maps the two radiance panels and normalises the error. ``scale``: the error at the
+    top of the colour scale (default its 99th percentile; the title gives the scale and the largest error)."""
+    from lodprt.display.error_figure import ERROR_LABEL, check_scale, error_numbers, error_scale, false_colour, panel_figure
     from lodprt.display.render import render, tone_map
+    from lodprt.runtime.samples import default_white
 
+    check_scale(scale)
     eye = np.asarray(eye, np.float64)
     positions = store.positions
     if target is None:
         target = 0.5 * (positions.min(0) + positions.max(0))
     cut = store.radiance(sample, eye).astype(np.float64)
     full = full_resolution_radiance(store, sample, eye, device)
-    err = np.abs(cut - full).mean(1)
-    peak = float(np.abs(full).max()) or 1.0
-    rel = err / peak
-    vmax = float(scale) if scale is not None else max(float(rel.max()), 1e-12)
-    white = float(np.percentile(full[full > 0], 99)) if (full > 0).any() else 1.0
-    cmap = plt.get_cmap("inferno")
+    white = float(white) if white is not None else default_white(store)
+    numbers, rel, covered = error_numbers(cut, full, white)
+    vmax, how = error_scale(numbers, scale)
     kept = len(store.sample(sample)[0])
-    views = [
-        (tone_map(cut, white), f"light cut ({kept:,} of {store.num_vertices:,} vertices), completed"),
-        (tone_map(full, white), "full resolution"),
-        (cmap(np.clip(rel / vmax, 0, 1))[:, :3], "|cut - full| / max radiance"),
-    ]
-    tri = store.faces
-    fig, axes = plt.subplots(1, 3, figsize=(3 * size[0] / 100 + 1, size[1] / 100 + 0.8), dpi=100)
-    for ax, (colours, title) in zip(axes, views):
-        ax.imshow(render(positions, tri, colours, eye=eye, target=target, fov=fov, size=size))
-        ax.set_title(title, fontsize=9)
-        ax.axis("off")
-    sm = matplotlib.cm.ScalarMappable(norm=matplotlib.colors.Normalize(0, vmax), cmap=cmap)
-    fig.colorbar(sm, ax=axes[2], fraction=0.046, pad=0.02).set_label("relative error", fontsize=8)
-    rmse = float(np.sqrt(np.mean((cut - full) ** 2)) / max(np.sqrt(np.mean(full**2)), 1e-30))
-    fig.suptitle(f"sample {sample}, threshold {store.attrs.get('threshold_deg')} deg: relative RMSE {rmse:.4f}, "
-                 f"max {float(rel.max()):.4f}", fontsize=10)
-    fig.savefig(out_png)
-    plt.close(fig)
-    return {"relative_rmse": rmse, "relative_max": float(rel.max()), "vertices_kept": kept}
+    views = [tone_map(cut, white), tone_map(full, white), false_colour(rel, vmax)]
+    titles = [f"light cut ({kept:,} of {store.num_vertices:,} vertices), completed", "full resolution", ERROR_LABEL]
+    images = [render(positions, store.faces, c, eye=eye, target=target, fov=fov, size=size) for c in views]
+    panel_figure(out_png, images, titles, vmax,
+                 f"sample {sample}, light cut threshold {store.attrs.get('threshold_deg')} deg: PSNR "
+                 f"{numbers['psnr_db']:.1f} dB (clipped at white), relative RMSE {numbers['relative_rmse']:.4f}, "
+                 f"mean {numbers['mean_difference']:.4f}\nerror = |cut - full| / white (white {white:.3g}, the run "
+                 f"time's), per vertex; {how}")
+    return {**numbers, "vertices_kept": kept, "white": white, "error": rel}

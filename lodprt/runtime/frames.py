@@ -12,6 +12,7 @@ import numpy as np
 
 from lodprt.runtime.camera import Camera
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
+from lodprt.runtime.inside import InsideCheck
 from lodprt.runtime.lights import LightInterpolator, check_lights
 
 log = logging.getLogger(__name__)
@@ -158,8 +159,10 @@ class StoreFrames:
         self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"], outside=outside)
         self._lights = store.light_positions[store.num_samples // 2][None, :]
         self._colors = None
+        self.inside = InsideCheck(store)  # a light or eye inside a closed object: one warning each
 
     def set_lights(self, positions, colors=None) -> None:
+        self.inside.check(np.asarray(positions, np.float64).reshape(-1, 3), "light")
         self._lights, self._colors = self.interp.clamp(np.asarray(positions, np.float64).reshape(-1, 3))[0], colors
 
     def set_camera(self, camera=None, target=None, *, eye=None, **fields) -> Camera:
@@ -168,6 +171,7 @@ class StoreFrames:
 
         centre = None if target is not None or isinstance(camera, Camera) else scene_centre(self.store)
         self.camera = camera_for(camera, eye=eye, target=target, default_target=centre, **fields)
+        self.inside.check(self.camera.eye, "eye")
         return self.camera
 
     def set_lod(self, enabled: bool) -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION, DirectLight, check_interpolation
+from lodprt.runtime.inside import InsideCheck
 from lodprt.runtime.lights import LightInterpolator, check_lights
 from lodprt.runtime.samples import SampleCache
 
@@ -33,6 +34,8 @@ class Relighting:
         self.interp = LightInterpolator(store.light_positions, store.root["lights"].attrs["box"],
                                         weighting=weighting, outside=outside)
         self.direct = None if interpolation == "thesis" else DirectLight(store, device, interpolation)
+        #: a light or an eye inside a closed object is warned about once each (``lodprt.runtime.inside``)
+        self.inside = InsideCheck(store)
         d = self.direct
         #: the lighting reads the samples' coefficients: T-12, or M-1's residual on a GI store
         self.uses_samples = d is None or d.residual
@@ -50,6 +53,7 @@ class Relighting:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each);
         outside the sampled region clamped with a warning, or an error (``outside``)."""
         pos, col = check_lights(positions, colors, self.store.intensity)
+        self.inside.check(pos, "light")  # where asked for, before any clamping
         pos, moved = self.interp.clamp(pos)  # refuses, or warns the first time a light is clamped
         idx, w, _ = self.interp.weights(pos)
         W = np.zeros((len(self.interp.samples), 3))
@@ -59,6 +63,11 @@ class Relighting:
         self.weights = W
         self.used_samples = np.flatnonzero(np.abs(W).sum(1) > 0)
         self.used_slots = self.samples.ensure(self.used_samples)  # completes the samples not held yet (T-15)
+
+    def watch_eye(self, camera):
+        """``camera``, its eye checked against the scene's closed objects (one warning for the first inside)."""
+        self.inside.check(camera.eye, "eye")
+        return camera
 
     def slot_of_sample(self) -> np.ndarray:
         """(S,) int32 the cache slot holding each light sample in use, -1 for the others."""

@@ -340,8 +340,8 @@ class Runtime:
         old = self.camera
         if self._centre is None and target is None and not isinstance(camera, Camera):
             self._centre = scene_centre(self.store)
-        self.camera = camera_for(camera, eye=eye, target=target, default_target=self._centre, up=up, fov=fov,
-                                 width=width, height=height, near=near, far=far)
+        self.camera = self.lighting.watch_eye(camera_for(camera, eye=eye, target=target, default_target=self._centre,
+                                                         up=up, fov=fov, width=width, height=height, near=near, far=far))
         self._dirty = True
         if old is None or camera_jump(old, self.camera, JUMP):
             self._refresh_all = True

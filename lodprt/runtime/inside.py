@@ -1,0 +1,58 @@
+"""A warning when a light or the eye lies inside a closed mesh of the store's scene (``lodprt.model.inside``): a
+light there lights only the mesh's inside (and, clamped into the sampled region, renders as if from elsewhere), an
+eye there sees the inside's back faces, which are culled (a black frame). Logged like the clamp warning of
+``lodprt.runtime.lights``: once per run time for the lights and once for the eye, naming the position and the
+object; later positions are still checked only until the first warning of their kind."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from lodprt.model.inside import inside_mesh
+
+log = logging.getLogger(__name__)
+
+WHY = {"light": "it lights that mesh's inside only", "eye": "the frame shows that mesh's culled inside (black)"}
+
+
+class InsideCheck:
+    """Checks lights and eyes against each object of ``store``'s scene (its faces grouped by the object of their
+    first vertex; names from the store's ``object_names``, the floor last)."""
+
+    def __init__(self, store):
+        self.store = store
+        self.parts = None
+        self.warned: set[str] = set()
+        self.checked: dict[str, tuple] = {}
+
+    def objects(self) -> list[tuple[str, np.ndarray]]:
+        """(name, faces (F_k, 3)) per object of the scene, built on first use."""
+        if self.parts is None:
+            faces = np.asarray(self.store.faces)
+            object_id = np.asarray(self.store.read("scene/object_id"))
+            names = list(self.store.root["scene"].attrs.get("object_names", []))
+            of_face = object_id[faces[:, 0]] if len(faces) else np.zeros(0, int)
+            self.parts = [(names[k] if k < len(names) else f"object {k}", faces[of_face == k])
+                          for k in np.unique(of_face)]
+        return self.parts
+
+    def check(self, points, what: str) -> list[tuple[tuple, str]]:
+        """Warn (once per ``what``, "light" or "eye") when one of ``points`` (P, 3) lies inside a closed object;
+        returns the (position, object) pairs found (empty once ``what`` was warned about, or for the same points as
+        the last call)."""
+        pts = np.asarray(points, np.float64).reshape(-1, 3)
+        key = tuple(np.round(pts, 12).ravel())
+        if what in self.warned or self.checked.get(what) == key:
+            return []
+        self.checked[what] = key
+        positions = self.store.positions
+        found = [(tuple(float(x) for x in p), name) for name, faces in self.objects()
+                 for p, inside in zip(pts, inside_mesh(pts, positions, faces)) if inside]
+        if found:
+            self.warned.add(what)
+            (p, name), more = found[0], len(found) - 1
+            log.warning("%s (%.4g, %.4g, %.4g) lies inside the closed mesh %r: %s%s (further %ss inside a mesh are "
+                        "not warned about)", what, *p, name, WHY[what], f"; {more} more inside" if more else "", what)
+        return found
