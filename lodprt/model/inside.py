@@ -40,14 +40,17 @@ def first_hits(origin, direction, v0, e1, e2) -> tuple[int, float]:
 
 
 def back_face_hits(point, positions, faces) -> int:
-    """In how many of ``DIRECTIONS`` the first face hit from ``point`` is a back face of the mesh."""
+    """In how many of ``DIRECTIONS`` the first face hit from ``point`` is a back face of the mesh, counted until
+    more than ``MISSES`` directions were not (then the point is outside: the rays an outside point needs are few)."""
     tri = np.asarray(positions, np.float64)[np.asarray(faces)]
     v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     normals = np.cross(e1, e2)
     count = 0
-    for d in DIRECTIONS:
+    for i, d in enumerate(DIRECTIONS):
         k, _ = first_hits(np.asarray(point, np.float64), d, v0, e1, e2)
         count += int(k >= 0 and normals[k] @ d > 0)
+        if i + 1 - count > MISSES:  # too many rays left through a front face or missed: not inside, stop
+            break
     return count
 
 

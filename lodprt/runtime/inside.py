@@ -24,6 +24,7 @@ class InsideCheck:
     def __init__(self, store):
         self.store = store
         self.parts = None
+        self.boxes = None
         self.warned: set[str] = set()
         self.checked: dict[str, tuple] = {}
 
@@ -48,8 +49,15 @@ class InsideCheck:
             return []
         self.checked[what] = key
         positions = self.store.positions
-        found = [(tuple(float(x) for x in p), name) for name, faces in self.objects()
-                 for p, inside in zip(pts, inside_mesh(pts, positions, faces)) if inside]
+        if self.boxes is None:  # each object's bounding box: a point outside it is outside without a ray
+            self.boxes = [(positions[np.unique(f)].min(0), positions[np.unique(f)].max(0)) if len(f) else None
+                          for _, f in self.objects()]
+        found = []
+        for (name, faces), box in zip(self.objects(), self.boxes):
+            near = np.zeros(len(pts), bool) if box is None else ((pts > box[0]) & (pts < box[1])).all(1)
+            if near.any():
+                hits = inside_mesh(pts[near], positions, faces)
+                found += [(tuple(float(x) for x in p), name) for p in pts[near][hits]]
         if found:
             self.warned.add(what)
             (p, name), more = found[0], len(found) - 1
