@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
+import itertools
 import logging
 import math
 import os
@@ -371,20 +372,30 @@ def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[objec
 
 def _run_samples(job: SampleJob, baker: Baker, lightcut, todo: list[int], jobs: int | None, progress) -> dict:
     """Bake the light samples ``todo`` on ``jobs`` threads (default: every core on the CPU, 1 on CUDA), full
-    resolution or on their light cuts; record each as it finishes. Returns their statistics by sample."""
+    resolution or on their light cuts; record each as it finishes. Returns their statistics by sample.
+
+    At most ``2 * jobs`` samples are in flight (submitted, not yet written) and a written sample's arrays are
+    dropped with its future, so the bake's memory does not grow with the number of samples (docs/SCALE.md)."""
     if jobs is None:
         jobs = (os.cpu_count() or 1) if baker.device == "cpu" else 1
     jobs = max(1, min(jobs, len(todo) or 1))
     samples: dict[int, dict] = {}
     pool = concurrent.futures.ThreadPoolExecutor(max_workers=jobs)
+    queue, pending = iter(todo), set()
     try:
-        futures = [pool.submit(job.compute, baker, lightcut, k) for k in todo]
-        for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
-            k, *rest = fut.result()
-            samples[k] = job.write(k, *rest)
-            if progress is not None:
-                progress(done, len(todo))
-    except BaseException:  # Ctrl-C or an error: the samples not started are not baked first
+        while True:
+            for k in itertools.islice(queue, 2 * jobs - len(pending)):
+                pending.add(pool.submit(job.compute, baker, lightcut, k))
+            if not pending:
+                break
+            finished, pending = concurrent.futures.wait(pending, return_when=concurrent.futures.FIRST_COMPLETED)
+            for fut in finished:
+                k, *rest = fut.result()
+                samples[k] = job.write(k, *rest)
+                del rest  # this sample's arrays go now, not when the bake ends
+                if progress is not None:
+                    progress(len(samples), len(todo))
+    except BaseException:  # Ctrl-C or an error: the samples not started are not baked
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     pool.shutdown()
