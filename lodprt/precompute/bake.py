@@ -30,6 +30,7 @@ from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model.scene import Scene
 from lodprt.precompute.baker import Baker, bake_kernels, layout, material_tables, ray_offset
 from lodprt.store.bake_store import FORMAT_VERSION, sample_group
+from lodprt.store.white import sample_record
 from lodprt.store.writer import FORMAT_NAME, StoreWriter
 
 log = logging.getLogger(__name__)
@@ -426,7 +427,8 @@ def _write_root(writer: StoreWriter, scene: Scene, result: BakeResult, threshold
 
 def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visible, seconds: float,
             stats: dict | None = None) -> dict:
-    """Write light sample ``k`` (when there is a store) and return its statistics (with ``stats``)."""
+    """Write light sample ``k`` (when there is a store) and return its statistics (with ``stats``); the group's
+    attributes add the sample's default-white record (``lodprt.store.white``, DW-1), not part of the statistics."""
     counts = np.bincount(visible, minlength=4)
     info = {
         **(stats or {}),
@@ -443,7 +445,7 @@ def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visib
         writer.array(f"{g}/coefficients", coeffs, chunk_rows=1 << 16)
         for name, arr in extra.items():
             writer.array(f"{g}/{name}", arr, chunk_rows=1 << 18)
-        writer.attrs(g, **info)
+        writer.attrs(g, **info, **sample_record(coeffs))
     return info
 
 

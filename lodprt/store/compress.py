@@ -19,6 +19,7 @@ import numpy as np
 
 from lodprt.store import codecs
 from lodprt.store.bake_store import FORMAT_VERSION, Store, open_store, sample_group
+from lodprt.store.white import RECORD_KEYS, WHITE, record_white
 from lodprt.store.writer import StoreWriter
 
 log = logging.getLogger(__name__)
@@ -58,11 +59,13 @@ def compress_store(source: str | os.PathLike | Store, out: str | os.PathLike, co
         attrs = dict(src.attrs)
         attrs.pop("codec", None)
         attrs.pop("codec_bytes", None)
+        attrs.pop(WHITE, None)
         if codec.lossless:
             attrs["format_version"] = FORMAT_VERSION
         else:
             attrs.update(format_version=COMPRESSED_VERSION, codec=codec.name, codec_bytes=codec_bytes)
         writer.attrs(**attrs)
+        record_white(writer, decoded=True)
         path = writer.commit()
     return {"path": str(path), "codec": codec.name, "seconds": time.perf_counter() - t0, "samples": infos,
             "codec_bytes": codec_bytes}
@@ -106,7 +109,7 @@ def write_sample(writer: StoreWriter, src: Store, k: int, codec: codecs.Codec, i
     """Encode and write light sample ``k``; returns its attributes (the source's, with bytes and errors)."""
     g = sample_group(k)
     info = dict(src.sample_info(k))
-    for key in ("bytes", "bytes_raw", "max_abs_error", "rms_error", "scale_exponent", "band_bits"):
+    for key in ("bytes", "bytes_raw", "max_abs_error", "rms_error", "scale_exponent", "band_bits", *RECORD_KEYS):
         info.pop(key, None)
     raw = int(ids.nbytes + coeffs.astype(np.float32).nbytes + sum(np.asarray(a).nbytes for a in cut.values()))
     if codec.lossless:
