@@ -43,14 +43,14 @@ def compress_store(source: str | os.PathLike | Store, out: str | os.PathLike, co
         copy_static(src, writer)
         parent = src.read("hierarchy/parent").astype(np.int64) if src.has_hierarchy else None
         vertex = src.read("hierarchy/vertex").astype(np.int64) if src.has_hierarchy else None
-        decoded = [src.sample(k)[:2] + (src.cut_arrays(k),) for k in range(src.num_samples)]
         model, rows = None, None
-        if codec.kind == "cpca":
-            model, rows = fit_cpca(codec, [c for _, c, _ in decoded])
+        if codec.kind == "cpca":  # C-3 fits every row of the store at once; the other codecs one sample at a time
+            model, rows = fit_cpca(codec, [src.sample(k)[1] for k in range(src.num_samples)])
         infos, codec_bytes = [], 0
         if model is not None:
             codec_bytes = write_model(writer, model)
-        for k, (ids, coeffs, cut) in enumerate(decoded):
+        for k in range(src.num_samples):
+            (ids, coeffs), cut = src.sample(k), src.cut_arrays(k)
             info = write_sample(writer, src, k, codec, ids, coeffs, cut, parent, vertex, model,
                                 None if rows is None else rows[k])
             infos.append(info)
