@@ -5,7 +5,8 @@ store").
 Everything but the light samples (scene, materials, lights, hierarchy, their attributes) is copied array for array;
 each sample is decoded from the source, encoded (:mod:`lodprt.store.codecs`, C-1..C-4) and checked against the
 source: its attributes record the largest and the RMS error of the decoded coefficients (``max_abs_error``,
-``rms_error``), the encoded payload (``bytes``) and the version-1 payload it replaces (``bytes_raw``).
+``rms_error``), the encoded payload (``bytes``) and the version-1 payload it replaces (``bytes_raw``). The
+default-white records and ``default_white`` are made afresh from the decoded rows (``lodprt.store.white``).
 """
 
 from __future__ import annotations
