@@ -191,6 +191,19 @@ def scale_runtime(r: dict) -> str:
     return md(["floor", "samples", "open s", "first frame s", "run-time MiB", "samples completed"], rows)
 
 
+def bake_memory(r: dict) -> str:
+    rows = [[row["grid"], row["samples"], f(row["bake_s"]), n(row["before_mib"]), n(row["peak_mib"]),
+             f(row["vs_first"], 3)] for row in r["rows"]]
+    return md(["grid", "samples", "bake s", "before MiB", "peak MiB", "peak / first"], rows)
+
+
+def bake_memory_white(r: dict) -> str:
+    w = r["white"]
+    return md(["samples", "recorded attribute ms", "scan of every sample s", "equal"],
+              [[w["samples"], f(w["recorded_s"] * 1e3, 2), f(w["scan_s"], 2), "yes" if w["recorded"] == w["scanned"]
+                else "no"]])
+
+
 def scale_workers(r: dict) -> str:
     rows = [[row["mode"] if row["mode"] == "in-process" else f"`{row['mode']}`", f(row["bake_s"]),
              n(row["client_peak_mib"])] for row in r["worker_rows"]]
@@ -311,6 +324,8 @@ TABLES = {
     "scale_samples": ("scale", scale_samples),
     "scale_runtime": ("scale", scale_runtime),
     "scale_workers": ("scale", scale_workers),
+    "bake_memory": ("bake_memory", bake_memory),
+    "bake_memory_white": ("bake_memory", bake_memory_white),
     "gi": ("gi", gi),
     "gi_mitsuba": ("gi", gi_mitsuba),
     "volume": ("volume", volume),

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
+import itertools
 import logging
 import math
 import os
@@ -29,6 +30,7 @@ from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model.scene import Scene
 from lodprt.precompute.baker import Baker, bake_kernels, layout, material_tables, ray_offset
 from lodprt.store.bake_store import FORMAT_VERSION, sample_group
+from lodprt.store.white import sample_record
 from lodprt.store.writer import FORMAT_NAME, StoreWriter
 
 log = logging.getLogger(__name__)
@@ -371,20 +373,30 @@ def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[objec
 
 def _run_samples(job: SampleJob, baker: Baker, lightcut, todo: list[int], jobs: int | None, progress) -> dict:
     """Bake the light samples ``todo`` on ``jobs`` threads (default: every core on the CPU, 1 on CUDA), full
-    resolution or on their light cuts; record each as it finishes. Returns their statistics by sample."""
+    resolution or on their light cuts; record each as it finishes. Returns their statistics by sample.
+
+    At most ``2 * jobs`` samples are in flight (submitted, not yet written) and a written sample's arrays are
+    dropped with its future, so the bake's memory does not grow with the number of samples (docs/SCALE.md)."""
     if jobs is None:
         jobs = (os.cpu_count() or 1) if baker.device == "cpu" else 1
     jobs = max(1, min(jobs, len(todo) or 1))
     samples: dict[int, dict] = {}
     pool = concurrent.futures.ThreadPoolExecutor(max_workers=jobs)
+    queue, pending = iter(todo), set()
     try:
-        futures = [pool.submit(job.compute, baker, lightcut, k) for k in todo]
-        for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
-            k, *rest = fut.result()
-            samples[k] = job.write(k, *rest)
-            if progress is not None:
-                progress(done, len(todo))
-    except BaseException:  # Ctrl-C or an error: the samples not started are not baked first
+        while True:
+            for k in itertools.islice(queue, 2 * jobs - len(pending)):
+                pending.add(pool.submit(job.compute, baker, lightcut, k))
+            if not pending:
+                break
+            finished, pending = concurrent.futures.wait(pending, return_when=concurrent.futures.FIRST_COMPLETED)
+            for fut in finished:
+                k, *rest = fut.result()
+                samples[k] = job.write(k, *rest)
+                del rest  # this sample's arrays go now, not when the bake ends
+                if progress is not None:
+                    progress(len(samples), len(todo))
+    except BaseException:  # Ctrl-C or an error: the samples not started are not baked
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     pool.shutdown()
@@ -415,7 +427,8 @@ def _write_root(writer: StoreWriter, scene: Scene, result: BakeResult, threshold
 
 def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visible, seconds: float,
             stats: dict | None = None) -> dict:
-    """Write light sample ``k`` (when there is a store) and return its statistics (with ``stats``)."""
+    """Write light sample ``k`` (when there is a store) and return its statistics (with ``stats``); the group's
+    attributes add the sample's default-white record (``lodprt.store.white``, DW-1), not part of the statistics."""
     counts = np.bincount(visible, minlength=4)
     info = {
         **(stats or {}),
@@ -432,7 +445,7 @@ def _record(writer: StoreWriter | None, k: int, kept, extra: dict, coeffs, visib
         writer.array(f"{g}/coefficients", coeffs, chunk_rows=1 << 16)
         for name, arr in extra.items():
             writer.array(f"{g}/{name}", arr, chunk_rows=1 << 18)
-        writer.attrs(g, **info)
+        writer.attrs(g, **info, **sample_record(coeffs))
     return info
 
 

@@ -12,8 +12,8 @@ import typing
 
 import numpy as np
 
-from lodprt.errors import LodprtError
-from lodprt.model import sh
+from lodprt.errors import LodprtError, StoreError
+from lodprt.store.white import WHITE, view_average, white_scale
 
 log = logging.getLogger(__name__)
 
@@ -149,17 +149,24 @@ class SampleCache:
 
 def default_white(store) -> float:
     """The radiance shown as white by default: the 99th percentile over every sample's baked vertices of the
-    view-averaged radiance (y_0 term, brightest channel, the bake's intensity), read one sample at a time from the
-    store (the stored rows only: no completion, memory for one sample). The same rule as
-    :func:`lodprt.runtime.frames.auto_white` (which it calls), applied to the whole store rather than one frame: the
-    Runtime's fixed white, so that frames do not change brightness as the light moves."""
+    view-averaged radiance (y_0 term, brightest channel, the bake's intensity; DW-1, DW-2 of
+    :mod:`lodprt.store.white`). The store's recorded ``default_white`` (written at bake time) when it has one: one
+    attribute, no sample read. Otherwise (stores baked before the record) read one sample at a time from the store
+    (the stored rows only: no completion, memory for one sample) and given to
+    :func:`lodprt.runtime.frames.auto_white`, the same rule applied to one frame: the Runtime's fixed white, so
+    that frames do not change brightness as the light moves."""
     from lodprt.runtime.frames import auto_white
 
-    y0 = sh.basis(np.array([0.0, 0.0, 1.0]), 1)[0]
-    scale = float(np.max(store.intensity)) * y0
+    recorded = store.attrs.get(WHITE)
+    if recorded is not None:
+        if isinstance(recorded, bool) or not isinstance(recorded, (int, float)) or not 0 < recorded < float("inf"):
+            raise StoreError(f"{store.path}: root attribute {WHITE} is {recorded!r}; expected a positive number "
+                             "(bake the store again, or pass white=)")
+        return float(recorded)
+    scale = white_scale(store.intensity)
     parts = []
     for k in range(store.num_samples):
         _, c = store.sample(k)
-        dc = np.abs(np.asarray(c, np.float32)[:, :, 0]).max(1) * scale
+        dc = view_average(c) * scale  # DW-1
         parts.append(dc[dc > 0])
     return auto_white(np.concatenate(parts) if parts else np.zeros(0))

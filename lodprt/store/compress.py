@@ -5,7 +5,8 @@ store").
 Everything but the light samples (scene, materials, lights, hierarchy, their attributes) is copied array for array;
 each sample is decoded from the source, encoded (:mod:`lodprt.store.codecs`, C-1..C-4) and checked against the
 source: its attributes record the largest and the RMS error of the decoded coefficients (``max_abs_error``,
-``rms_error``), the encoded payload (``bytes``) and the version-1 payload it replaces (``bytes_raw``).
+``rms_error``), the encoded payload (``bytes``) and the version-1 payload it replaces (``bytes_raw``). The
+default-white records and ``default_white`` are made afresh from the decoded rows (``lodprt.store.white``).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 
 from lodprt.store import codecs
 from lodprt.store.bake_store import FORMAT_VERSION, Store, open_store, sample_group
+from lodprt.store.white import RECORD_KEYS, WHITE, record_white
 from lodprt.store.writer import StoreWriter
 
 log = logging.getLogger(__name__)
@@ -42,14 +44,14 @@ def compress_store(source: str | os.PathLike | Store, out: str | os.PathLike, co
         copy_static(src, writer)
         parent = src.read("hierarchy/parent").astype(np.int64) if src.has_hierarchy else None
         vertex = src.read("hierarchy/vertex").astype(np.int64) if src.has_hierarchy else None
-        decoded = [src.sample(k)[:2] + (src.cut_arrays(k),) for k in range(src.num_samples)]
         model, rows = None, None
-        if codec.kind == "cpca":
-            model, rows = fit_cpca(codec, [c for _, c, _ in decoded])
+        if codec.kind == "cpca":  # C-3 fits every row of the store at once; the other codecs one sample at a time
+            model, rows = fit_cpca(codec, [src.sample(k)[1] for k in range(src.num_samples)])
         infos, codec_bytes = [], 0
         if model is not None:
             codec_bytes = write_model(writer, model)
-        for k, (ids, coeffs, cut) in enumerate(decoded):
+        for k in range(src.num_samples):
+            (ids, coeffs), cut = src.sample(k), src.cut_arrays(k)
             info = write_sample(writer, src, k, codec, ids, coeffs, cut, parent, vertex, model,
                                 None if rows is None else rows[k])
             infos.append(info)
@@ -58,11 +60,13 @@ def compress_store(source: str | os.PathLike | Store, out: str | os.PathLike, co
         attrs = dict(src.attrs)
         attrs.pop("codec", None)
         attrs.pop("codec_bytes", None)
+        attrs.pop(WHITE, None)
         if codec.lossless:
             attrs["format_version"] = FORMAT_VERSION
         else:
             attrs.update(format_version=COMPRESSED_VERSION, codec=codec.name, codec_bytes=codec_bytes)
         writer.attrs(**attrs)
+        record_white(writer, decoded=True)
         path = writer.commit()
     return {"path": str(path), "codec": codec.name, "seconds": time.perf_counter() - t0, "samples": infos,
             "codec_bytes": codec_bytes}
@@ -106,7 +110,7 @@ def write_sample(writer: StoreWriter, src: Store, k: int, codec: codecs.Codec, i
     """Encode and write light sample ``k``; returns its attributes (the source's, with bytes and errors)."""
     g = sample_group(k)
     info = dict(src.sample_info(k))
-    for key in ("bytes", "bytes_raw", "max_abs_error", "rms_error", "scale_exponent", "band_bits"):
+    for key in ("bytes", "bytes_raw", "max_abs_error", "rms_error", "scale_exponent", "band_bits", *RECORD_KEYS):
         info.pop(key, None)
     raw = int(ids.nbytes + coeffs.astype(np.float32).nbytes + sum(np.asarray(a).nbytes for a in cut.values()))
     if codec.lossless:

@@ -34,6 +34,7 @@ from lodprt.store.bake_store import is_store, open_store, sample_group
 from lodprt.store.writer import StoreWriter, dead_partials
 from lodprt.store.sample_groups import (COMPLETE, WRITING, complete_samples, discard_incomplete, group_attrs,
                                         is_complete, tidy)
+from lodprt.store.white import RECORD_KEYS, record_white
 
 log = logging.getLogger(__name__)
 
@@ -234,9 +235,9 @@ class BakeTarget:
         return [k for k in range(len(self.positions)) if k not in done]
 
     def recorded(self, k: int) -> dict:
-        """The statistics a complete sample group records (its attributes but the mark)."""
+        """The statistics a complete sample group records (its attributes but the mark and the white record)."""
         attrs = group_attrs((self.finished or self.partial) / sample_group(k)) or {}
-        return {key: v for key, v in attrs.items() if key != COMPLETE}
+        return {key: v for key, v in attrs.items() if key != COMPLETE and key not in RECORD_KEYS}
 
     def hierarchy(self):
         """The hierarchy a complete ``hierarchy`` group holds (``Hierarchy``) and its recorded build seconds."""
@@ -254,7 +255,9 @@ class BakeTarget:
                 "hierarchy_seconds": attrs.get("hierarchy_seconds"), "reused_samples": total}
 
     def finish(self, **timings) -> Path:
-        """Record the timings, check that every sample is complete, tidy and commit."""
+        """Record the timings, check that every sample is complete, record the default white from the samples'
+        records (``lodprt.store.white``: the samples of a resumed, extended or distributed bake alike), tidy and
+        commit."""
         if self.finished is not None:
             return self.finished
         if timings:
@@ -263,6 +266,7 @@ class BakeTarget:
         missing = self.todo()
         if missing:
             raise StoreError(f"{self.partial}: samples {missing[:5]} are not complete; not committing")
+        record_white(self.writer)
         return self.writer.commit()
 
     def abort(self) -> None:
