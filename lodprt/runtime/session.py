@@ -1,7 +1,7 @@
 """The ``Runtime`` (SPEC 5; thesis 3.4, T-12..T-15; seed 003 section 5; S-1, S-2 beyond the thesis): relight a
 baked scene with moving point lights and move a view-dependent cut of the vertex hierarchy every frame.
 
-    rt = lodprt.Runtime(lodprt.open_store("bunny.zarr"))          # criterion "screen", bound 0.8 of white
+    rt = lodprt.Runtime(lodprt.open_store("bunny.zarr"))          # ScreenCriterion(), bound 0.8 of white
     rt.set_lights([(0.1, 0.28, 0.0)], colors=[(1.0, 0.9, 0.8)])
     rt.set_camera((0, 0.3, 0.6), (0, 0.1, 0), fov=40, width=800, height=600)
     frame = rt.update()          # Frame: positions, triangles, coefficients, radiance, stats
@@ -25,6 +25,7 @@ import numpy as np
 from lodprt.errors import LodprtError
 from lodprt.runtime import node_bounds
 from lodprt.runtime import frame_error
+from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
 from lodprt.runtime.frames import Frame
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
@@ -56,18 +57,6 @@ BACKOFF_EDGES = 20_000
 FIRST_ROUNDS = 12
 #: E-4: the relative change of the bound below which the steering keeps it
 STEER_STEP = 0.1
-#: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
-CRITERIA = ("screen", "thesis")
-#: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
-DEFAULT_ERROR_BOUND = {"screen": 0.8, "thesis": 0.25}
-#: "screen": the geometric error on screen, pixels, that weighs as much as the default bound (the exchange rate
-#: between pixels of displacement and units of white: 1 px = the default bound)
-PIXEL_TOLERANCE = 1.0
-#: "screen": the share of the screen a node may cover at the bound's per-pixel error; a larger node's shading term
-#: grows with sqrt(area / (AREA_SHARE W H)), so its squared error summed over its pixels stays under
-#: bound^2 AREA_SHARE W H (S-1): it adds at most bound^2 AREA_SHARE to the frame's mean squared error
-AREA_SHARE = 1.0 / 32768
-
 
 class NodeErrors(typing.NamedTuple):
     """Per candidate node (K,): culled (T-13 or outside the frustum), error (the criterion's, compared with the
@@ -86,11 +75,11 @@ class NodeErrors(typing.NamedTuple):
 class Runtime:
     """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
 
-    criterion: "screen" (default; S-1: the shading a coarse node could get wrong (S-2), weighted by the pixels it
-    covers (above AREA_SHARE of the screen by the square root of its area), and its geometric error in pixels at
-    ``pixel_tolerance`` per default bound, each against the bound) or "thesis" (T-14: ``alpha e_geo + (1 - alpha)
-    e_lumi``); error_bound: refine above, coarsen at or below bound / HYSTERESIS (None: the criterion's default,
-    DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs e_geo against e_lumi;
+    criterion: a ``lodprt.runtime.criteria.Criterion`` (default ``ScreenCriterion()``: S-1 with S-2; or
+    ``ThesisCriterion``: T-14) holding its settings, or its name ("screen", "thesis") with the settings as keywords:
+    error_bound (refine above, coarsen at or below bound / HYSTERESIS; None: the criterion's default), alpha
+    (T-14's weight of e_geo, "thesis"), pixel_tolerance and target_psnr ("screen": steer the bound toward this
+    estimated PSNR of the frame against the full mesh, E-1..E-4, ``error_bound`` being the starting bound);
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
@@ -100,35 +89,26 @@ class Runtime:
     fewer than one frame's samples): a sample is completed (T-15) when the lights first give it a weight
     (``lodprt.runtime.samples.SampleCache``);
     progress(done, total): called as the light samples a frame needs are completed;
-    target_psnr: with the screen criterion, steer the bound toward this estimated PSNR of the frame against the
-    full mesh (E-1..E-4, ``lodprt.runtime.frame_error``; ``error_bound`` is then the starting bound);
     interpolation: how a light between samples is lit (``lodprt.runtime.direct_light.INTERPOLATIONS``): "direct"
     (default: the light's direct Phong radiance in closed form times a shadow ray's visibility, plus the samples'
     interpolated residual, M-1, M-2), "direct-agree" (rays only where the samples disagree, M-3), "direct-blend"
     (no rays, M-4), or "thesis" (T-12: the samples' radiance blended).
     """
 
-    def __init__(self, store, *, error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
-                 pixel_tolerance: float = PIXEL_TOLERANCE, triangle_budget: int | None = None,
+    def __init__(self, store, *, error_bound: float | None = None, alpha: float | None = None,
+                 criterion: str | Criterion = "screen", pixel_tolerance: float | None = None,
+                 triangle_budget: int | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 1,
                  lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None,
                  interpolation: str = DEFAULT_INTERPOLATION, target_psnr: float | None = None):
         from lodprt.devices import resolve_device
 
-        if criterion not in CRITERIA:
-            raise LodprtError(f"criterion {criterion!r}: choose one of {', '.join(CRITERIA)}")
-        self.criterion = criterion
-        p = float(pixel_tolerance)
-        if not p > 0 or not math.isfinite(p):
-            raise LodprtError(f"pixel_tolerance {pixel_tolerance}: must be a positive number of pixels")
-        self.pixel_tolerance = p
-        self.target_psnr = frame_error.check_target(target_psnr)
-        if self.target_psnr is not None and (criterion != "screen" or triangle_budget is not None):
-            raise LodprtError("target_psnr steers the screen criterion's bound: not with criterion 'thesis' or a "
-                              "triangle_budget")
+        #: the view cut's criterion, with its settings (the steering replaces it with one of another bound)
+        self.criterion = resolve_criterion(criterion, error_bound=error_bound, alpha=alpha,
+                                           pixel_tolerance=pixel_tolerance, target_psnr=target_psnr)
+        if self.criterion.steered() and triangle_budget is not None:
+            raise LodprtError("target_psnr steers the screen criterion's bound: not with a triangle_budget")
         self.estimated_psnr = None  # E-3 of the last estimate (target_psnr set)
-        if error_bound is None:
-            error_bound = DEFAULT_ERROR_BOUND[criterion]
         self.device = resolve_device(device)
         self.store = store
         self.h = h = store.hierarchy()
@@ -137,7 +117,6 @@ class Runtime:
         self.normals = np.asarray(store.normals, np.float64)
         self._pos32, self._nrm32 = self.positions.astype(np.float32), self.normals.astype(np.float32)  # frames
         self.bounds = np.array([self.positions.min(0), self.positions.max(0)]) if len(self.positions) else np.zeros((2, 3))
-        self.set_error_bound(error_bound, alpha)
         if triangle_budget is not None and int(triangle_budget) < 1:
             raise LodprtError(f"triangle_budget {triangle_budget}: must be >= 1")
         self.triangle_budget = None if triangle_budget is None else int(triangle_budget)
@@ -184,7 +163,7 @@ class Runtime:
         self.camera: Camera | None = None
         self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
-            self._node_bounds("detail" if criterion == "screen" else "box_centre")
+            self._node_bounds(self.criterion.NODE_BOUNDS[0])
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
     # -- set-up ------------------------------------------------------------------------------------------------
@@ -241,7 +220,7 @@ class Runtime:
         """The view_errors kernel's box_centre, box_half and detail arrays: the ones its criterion reads (and the
         boxes too when ``exact``, which evaluates every term); a one-row placeholder of the same width for the
         others, which the kernel then never indexes."""
-        need = {"detail"} if self.criterion == "screen" else {"box_centre", "box_half"}
+        need = set(self.criterion.NODE_BOUNDS)
         if exact:
             need |= {"box_centre", "box_half"}
         if "placeholder" not in self._d:
@@ -296,19 +275,32 @@ class Runtime:
         used = wp.array(self.used_slots.astype(np.int32), dtype=wp.int32, device=self.device)
         return used, wp.array(weights, dtype=wp.float32, device=self.device)
 
+    @property
+    def error_bound(self) -> float:
+        """The criterion's error bound (steered by a target_psnr or a triangle_budget)."""
+        return self.criterion.error_bound
+
+    @error_bound.setter
+    def error_bound(self, value: float) -> None:
+        self.criterion = self.criterion.with_bound(value)
+
+    @property
+    def alpha(self) -> float:
+        """T-14's weight of e_geo ("thesis"; the default 0.6 for a criterion without one)."""
+        return getattr(self.criterion, "alpha", ThesisCriterion.alpha)
+
+    @property
+    def target_psnr(self) -> float | None:
+        """The screen criterion's target (E-4), or None."""
+        return getattr(self.criterion, "target_psnr", None)
+
     def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
-        """The criterion's error bound (>= 0) and, when given, alpha in [0, 1] (T-14's weight of e_geo)."""
-        e = float(error_bound)
-        if not e >= 0 or not math.isfinite(e):
-            raise LodprtError(f"error_bound {error_bound}: must be a finite number >= 0")
-        self.error_bound = e
+        """The criterion's error bound (>= 0) and, when given, alpha in [0, 1] (T-14's weight of e_geo; checked
+        and unread by a criterion without one)."""
+        new = self.criterion.with_bound(error_bound)
+        self.criterion = new if alpha is None else new.with_alpha(alpha)
         self._dirty = True
         self._refresh_all = True
-        if alpha is not None:
-            a = float(alpha)
-            if not 0.0 <= a <= 1.0:
-                raise LodprtError(f"alpha {alpha}: must lie in [0, 1]")
-            self.alpha = a
 
     def set_lod(self, enabled: bool) -> None:
         """LOD off shows the full mesh (every leaf active); on starts again from the base mesh."""
@@ -370,30 +362,21 @@ class Runtime:
             cam = self.camera
             used, weights = self._frame_inputs()
             bounds = self._kernel_bounds(exact)
+            mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height)
             self._launch(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
                 d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
-                *bounds, CRITERIA.index(self.criterion), int(self.interpolation != "thesis"),
+                *bounds, mode, int(self.interpolation != "thesis"),
                 wp.array(self.lighting.bracket_mask(), dtype=wp.int32, device=dev),
                 2 if detail_only else int(bool(exact)),
-                float(self.error_bound), float(HYSTERESIS), self.geo_rate(), self.area_ref(), self.alpha,
+                float(self.error_bound), float(HYSTERESIS), geo_rate, area_ref, alpha,
                 wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
         culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
         return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))
-
-    def geo_rate(self) -> float:
-        """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance; with a
-        target_psnr the steered bound's, so that the geometric error stays at pixel_tolerance pixels)."""
-        bound = self.error_bound if self.target_psnr is not None else DEFAULT_ERROR_BOUND["screen"]
-        return max(bound, 1e-12) / self.pixel_tolerance
-
-    def area_ref(self) -> float:
-        """S-1: the pixels a node may cover before its shading term grows (AREA_SHARE of the screen)."""
-        return AREA_SHARE * self.camera.width * self.camera.height
 
     def focal_px(self) -> float:
         """Focal length of the camera in pixels: (height / 2) / tan(fov / 2)."""
