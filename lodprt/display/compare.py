@@ -12,8 +12,8 @@ from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.sources import frame_source
 
 
-def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float | None = None,
+                   criterion="screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
                    outside: str = "clamp",
                    overwrite: bool = False, scale: float | None = None, wireframe: bool = False,
                    per_vertex: bool = False, exposure: float = 0.0, white: float | None = None,
@@ -34,9 +34,9 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     out = check_output(out, (".png", ".exr"), overwrite=overwrite)
     if out.suffix.lower() == ".exr":
         check_exr()
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
-    error_bound = getattr(source, "error_bound", error_bound)
+    source = frame_source(store, criterion=criterion, lod=True, interpolation=interpolation, outside=outside,
+                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
+    cut_criterion = getattr(source, "criterion", None)  # None: a store without a hierarchy
     source.set_lights(lights, colors)
     source.set_camera(camera)
     lod = source.update()
@@ -72,10 +72,10 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
         ax.axis("off")
     sm = matplotlib.cm.ScalarMappable(norm=matplotlib.colors.Normalize(0, vmax), cmap=cmap)
     fig.colorbar(sm, ax=axes[2], fraction=0.046, pad=0.02).set_label("difference / white", fontsize=8)
-    if error_bound is None:  # a store without a hierarchy: no view cut, both panels are full resolution
+    if cut_criterion is None:  # a store without a hierarchy: no view cut, both panels are full resolution
         what = "no hierarchy (full resolution both)"
     else:
-        what = f"{criterion} criterion, error bound {error_bound:g}" + (f", alpha {alpha:g}" if criterion == "thesis" else "")
+        what = cut_criterion.describe()
     fig.suptitle(f"{what}: PSNR {psnr:.1f} dB (clipped at white), relative "
                  f"RMSE {rmse:.4f}, mean |diff| {float(diff.mean()) if diff.size else 0.0:.4f} of white", fontsize=10)
     fig.savefig(out, bbox_inches="tight", pad_inches=0.1)

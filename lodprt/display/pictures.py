@@ -127,8 +127,8 @@ class VideoWriter:
         self.partial.unlink(missing_ok=True)
 
 
-def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float | None = None,
+                   criterion="screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
                    outside: str = "clamp",
                    lod: bool = True, overwrite: bool = False, **draw) -> dict:
     """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped;
@@ -137,8 +137,8 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
     out = check_output(out, (".png", ".npy", ".exr"), overwrite=overwrite)
     if out.suffix.lower() == ".exr":
         check_exr()
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
+    source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation, outside=outside,
+                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     frame = source.update()
@@ -154,8 +154,8 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
 
 
 def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, light_turns: float = 1.0,
-              fps: float = 12.0, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-              criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+              fps: float = 12.0, error_bound: float | None = None, alpha: float | None = None, lod: bool = True,
+              criterion="screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
               outside: str = "clamp",
               overwrite: bool = False, **draw) -> Path:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
@@ -182,8 +182,8 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
     elif not out.parent.is_dir():
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
+    source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation, outside=outside,
+                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
     images = []
     with Renderer() as renderer, _aborting(video):
         for k in range(frames):
