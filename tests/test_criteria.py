@@ -33,10 +33,10 @@ def ball_store(tmp_path_factory):
 
 
 def frames(rt, n=3):
-    """``n`` frames of an orbit at 320 x 240 with a light above the scene."""
+    """``n`` frames of an orbit at 320 x 240 with a light between the samples."""
     c = 0.5 * (rt.bounds[0] + rt.bounds[1])
     ext = float((rt.bounds[1] - rt.bounds[0]).max())
-    rt.set_lights([tuple(c + ext * np.array([0.1, 0.5, 0.05]))])
+    rt.set_lights(rt.store.light_positions.mean(0)[None, :])  # inside the light box
     out = []
     for k in range(n):
         a = 0.3 * k
