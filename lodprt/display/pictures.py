@@ -137,8 +137,8 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
     out = check_output(out, (".png", ".npy", ".exr"), overwrite=overwrite)
     if out.suffix.lower() == ".exr":
         check_exr()
-    source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation, outside=outside,
-                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
+    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     frame = source.update()
@@ -182,8 +182,8 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
     elif not out.parent.is_dir():
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
-    source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation, outside=outside,
-                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
+    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     images = []
     with Renderer() as renderer, _aborting(video):
         for k in range(frames):
