@@ -85,16 +85,19 @@ class Slider:
 SLIDER_MARGIN, SLIDER_ROW, SLIDER_LABEL, SLIDER_VALUE = 6, 16, 72, 44  # pixels: edge gap, row height, text widths
 
 
-def slider_layout(width: int, height: int, *, alpha: bool = True) -> tuple[Slider, ...]:
-    """The error-bound and (with ``alpha``, the thesis criterion's knob) alpha sliders in the bottom-left corner of a
-    ``width`` x ``height`` pixel window: a label column, the track, then the value; the track is 160 pixels wide,
-    less in a narrow window (at least 40)."""
+def slider_layout(width: int, height: int, *, alpha: bool = True, knobs=None) -> tuple[Slider, ...]:
+    """A criterion's sliders in the bottom-left corner of a ``width`` x ``height`` pixel window: one per knob with
+    a range (``knobs``: ``Criterion.KNOBS``; default the error bound and, with ``alpha``, the thesis criterion's
+    alpha), each a label column, the track, then the value; the track is 160 pixels wide, less in a narrow window
+    (at least 40)."""
     track = max(40, min(160, width - 2 * SLIDER_MARGIN - SLIDER_LABEL - SLIDER_VALUE - 8))
     x0 = SLIDER_MARGIN + 4 + SLIDER_LABEL
-    rows = (("error_bound", "error bound"), ("alpha", "alpha"))[: 2 if alpha else 1]
+    if knobs is None:
+        knobs = CRITERIA["thesis" if alpha else "screen"].KNOBS
+    rows = [(k.name, k.name.replace("_", " "), k.range) for k in knobs if k.range is not None]
     top = height - SLIDER_MARGIN - 4 - SLIDER_ROW * len(rows)
-    return tuple(Slider(name, label, (x0, top + i * SLIDER_ROW + 2, track, SLIDER_ROW - 4))
-                 for i, (name, label) in enumerate(rows))
+    return tuple(Slider(name, label, (x0, top + i * SLIDER_ROW + 2, track, SLIDER_ROW - 4), *span)
+                 for i, (name, label, span) in enumerate(rows))
 
 
 def _slider_panel(sliders, values) -> tuple[object, tuple[int, int]]:
@@ -204,7 +207,7 @@ class ViewerState:
     # -- sliders and the keys that change the same values -------------------------------------------------------
     def sliders(self) -> tuple[Slider, ...]:
         """The sliders laid out for the current window (camera) size, in its pixels."""
-        return slider_layout(self.camera.width, self.camera.height, alpha=self.has_knob("alpha"))
+        return slider_layout(self.camera.width, self.camera.height, knobs=CRITERIA[self.criterion].KNOBS)
 
     def has_knob(self, name: str) -> bool:
         """Whether the active criterion has the knob ``name`` (its ``KNOBS``; alpha only for "thesis")."""
