@@ -135,7 +135,7 @@ def view_errors(
     #                                                  and sample slot
     box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
     detail: wp.array3d(dtype=wp.float32),  # In: (N - V, S, C) S-2 bound of the completion residual / white
-    criterion: int,  # In: 0 "screen" (S-1), 1 "thesis" (T-14)
+    criterion: int,  # In: the criterion's MODE (lodprt.runtime.criteria): 0 "screen" (S-1), 1 "thesis" (T-14)
     sharp: int,  # In: 1 for the direct interpolations (M-5: each sample's S-2 detail at full weight), 0 for T-12
     bracket: wp.array(dtype=wp.int32),  # In: (S,) M-5: 1 for the slots around the light (sharp = 1 only)
     exact: int,  # In: 1 computes every term; 0 stops once the refine/coarsen decision is known; 2 every S-1 term

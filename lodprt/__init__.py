@@ -38,6 +38,8 @@ _LAZY = {
     "Store": "lodprt.store.bake_store",
     "open_store": "lodprt.store.bake_store",
     "Runtime": "lodprt.runtime.session",
+    "ScreenCriterion": "lodprt.runtime.criteria",
+    "ThesisCriterion": "lodprt.runtime.criteria",
     "Camera": "lodprt.runtime.camera",
     "Frame": "lodprt.runtime.frames",
     "LightInterpolator": "lodprt.runtime.lights",

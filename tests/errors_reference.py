@@ -13,25 +13,37 @@ from lodprt.runtime.frames import display
 from lodprt.runtime.session import NodeErrors
 
 
+#: S-1's constants as docs/RUNTIME.md states them (the oracle's own copies, not the production criterion's): the
+#: default bound E0 and the share of the screen a node may cover before its shading term grows
+SCREEN_DEFAULT_BOUND = 0.8
+AREA_SHARE = 1.0 / 32768
+
+
 def criterion_error(rt, culled, e_geo, e_lumi, footprint, e_detail) -> np.ndarray:
-    """The error compared with the bound (0 where culled): T-14 ``alpha e_geo + (1 - alpha) e_lumi`` for
-    "thesis"; for "screen" (S-1) ``max(E0 g_px / tau_px, e_detail min(1, pi r_px^2))``: the
-    geometric error in
-    pixels at the exchange rate E0 / tau_px (E0 the default bound, tau_px the pixel tolerance: at the default
-    bound a node refines when it moves anything by more than tau_px) and the luminance spread weighted by the
-    share of a pixel the node's footprint covers (S-2: the completion residuals and edge steps under the node,
+    """The error compared with the bound (0 where culled), from the criterion's settings only: T-14 ``alpha e_geo
+    + (1 - alpha) e_lumi`` for "thesis"; for "screen" (S-1) ``max(E0 g_px / tau_px, e_detail cover)``: the
+    geometric error in pixels at the exchange rate E0 / tau_px (E0 the default bound, or the steered bound under a
+    target_psnr; tau_px the pixel tolerance: at the default bound a node refines when it moves anything by more
+    than tau_px) and the S-2 detail bound weighted by the share of a pixel the node's footprint covers, growing with
+    sqrt(area / A_ref) above A_ref = AREA_SHARE W H (S-2: the completion residuals and edge steps under the node,
     not its spread: a smooth gradient spreads but interpolates well); one bound E then steers both."""
-    if rt.criterion == "thesis":
-        err = rt.alpha * e_geo + (1.0 - rt.alpha) * e_lumi
-    else:
+    crit = rt.criterion.settings()
+    if rt.criterion.name == "thesis":
+        alpha = crit["alpha"]
+        err = alpha * e_geo + (1.0 - alpha) * e_lumi
+    elif rt.criterion.name == "screen":
         cam = rt.camera
         g_px = e_geo * math.hypot(cam.width, cam.height)
-        geo_term = g_px * rt.geo_rate()
+        e0 = crit["error_bound"] if crit["target_psnr"] is not None else SCREEN_DEFAULT_BOUND
+        geo_term = g_px * max(e0, 1e-12) / crit["pixel_tolerance"]
         area = np.pi * footprint ** 2
-        ref = rt.area_ref()
+        ref = AREA_SHARE * cam.width * cam.height
         cover = np.where(area > ref, np.sqrt(area / ref), np.minimum(1.0, area))
         err = np.maximum(geo_term, e_detail * cover)
+    else:
+        raise LodprtError(f"criterion {rt.criterion.name!r}: the oracle has no reference for it")
     return np.where(culled, 0.0, err)
+
 
 def node_errors_reference(rt, nodes) -> NodeErrors:
     """``node_errors`` in float64 numpy (the tests' reference for the kernel)."""

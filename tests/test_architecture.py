@@ -185,7 +185,7 @@ def test_cli_choices_are_the_library_lists():
     from lodprt.cli.environment import TRANSFERS
     from lodprt.cli.main import build_parser
     from lodprt.precompute.transfer import MODES
-    from lodprt.runtime.session import CRITERIA
+    from lodprt.runtime.criteria import CRITERIA
 
     assert TRANSFERS == MODES
     choices = set()
@@ -193,4 +193,4 @@ def test_cli_choices_are_the_library_lists():
         for a in action._actions:
             if "--criterion" in a.option_strings:
                 choices.add(tuple(a.choices))
-    assert choices == {CRITERIA}
+    assert choices == {tuple(CRITERIA)}

@@ -87,7 +87,7 @@ def test_hard_shadow_boundary_is_kept(box_shadow):
 
     from lodprt.display.compare import frame_error
     from lodprt.display.render import Renderer
-    from lodprt.runtime.session import DEFAULT_ERROR_BOUND
+    from lodprt.runtime.criteria import DEFAULT_ERROR_BOUND
 
     cam = top_camera()
     white = 2.5 * 0.6  # kd 0.6, no falloff, N.L about 1 on the lit plane
@@ -126,7 +126,7 @@ def test_specular_highlight_on_a_plane_is_kept(tmp_path):
     from lodprt.display.compare import frame_error
     from lodprt.display.render import Renderer
     from lodprt.runtime.camera import Camera
-    from lodprt.runtime.session import DEFAULT_ERROR_BOUND
+    from lodprt.runtime.criteria import DEFAULT_ERROR_BOUND
 
     store = bake_scene(tmp_path, {"plane": grid_plane(121, 2.0)}, light=(-0.4, 0.8, 0.0), ks=0.8, shininess=40.0,
                        falloff="inverse-square", order=6)

@@ -13,7 +13,7 @@ import pytest
 
 from lodprt.runtime.camera import Camera
 from lodprt.display.viewer import SLIDER_ROW, Slider, Viewer, ViewerState, slider_layout
-from lodprt.runtime.session import DEFAULT_ERROR_BOUND
+from lodprt.runtime.criteria import DEFAULT_ERROR_BOUND
 
 
 def state():

@@ -95,22 +95,36 @@ def add_camera(p: argparse.ArgumentParser, *, eye_required: bool = True, up: boo
 
 
 def add_view_cut(p: argparse.ArgumentParser) -> None:
-    """The view cut's criterion and bounds (docs/RUNTIME.md)."""
-    # the library's list is lodprt.runtime.session.CRITERIA; the parser keeps its own copy so that `lodprt --help`
-    # does not import the run time (tests/test_architecture.py checks that the two agree)
-    p.add_argument("--criterion", choices=("screen", "thesis"), default="screen",
-                   help="view-cut criterion: 'screen' bounds the error on screen (luminance in units of white, "
-                        "geometry in pixels; default), 'thesis' is T-14's blend alpha e_geo + (1 - alpha) e_lumi")
-    p.add_argument("--target-psnr", type=float, default=None, metavar="DB",
-                   help="'screen': steer the bound toward this estimated PSNR of the frame against the full mesh "
-                        "(E-1..E-4 in docs/RUNTIME.md; --error-bound is then the starting bound)")
-    p.add_argument("--error-bound", type=float, default=None, metavar="E",
-                   help="view cut error bound (default 0.8 of white for 'screen': each coarse node adds at most "
-                        "E^2 / 32768 to the frame's mean squared error; 0.25 for 'thesis')")
-    p.add_argument("--alpha", type=float, default=0.6, metavar="A",
-                   help="'thesis' only: weight of the geometric error against the luminance error (default 0.6)")
+    """The view cut's criterion and its knobs (docs/RUNTIME.md), from the registry
+    ``lodprt.runtime.criteria.CRITERIA``: ``--criterion`` and one option per knob (``Knob``; a knob several criteria
+    have, as ``--error-bound``, once, its default then the criterion's); ``criterion(args)`` makes the object."""
+    from lodprt.runtime.criteria import CRITERIA
+
+    names = tuple(CRITERIA)
+    p.add_argument("--criterion", choices=names, default=names[0],
+                   help="view-cut criterion: " + ", ".join(c.SUMMARY for c in CRITERIA.values()))
+    knobs: dict = {}
+    for cls in CRITERIA.values():
+        for knob in cls.KNOBS:
+            knobs.setdefault(knob.name, []).append(knob)
+    for name, same in knobs.items():
+        defaults = {k.default for k in same}
+        default = defaults.pop() if len(defaults) == 1 else None  # None: each criterion's own
+        own = "" if default is None or len(same) > 1 else f" (default {default:g})"
+        what = "view cut error bound (default " if name == "error_bound" else ""
+        text = what + "; ".join(k.help for k in same) + (")" if what else "") + own
+        p.add_argument("--" + name.replace("_", "-"), type=float, default=default, metavar=same[0].metavar,
+                       help=text)
     add_interpolation(p)
     add_outside(p)
+
+
+def criterion(args):
+    """The ``lodprt.runtime.criteria.Criterion`` that ``add_view_cut``'s parsed options name (LodprtError naming a
+    bad value, or a knob another criterion reads: ``--target-psnr`` with 'thesis')."""
+    from lodprt.runtime.criteria import criterion_of
+
+    return criterion_of(args)
 
 
 def add_outside(p: argparse.ArgumentParser) -> None:

@@ -131,8 +131,7 @@ def _view_setup(args, store):
 
 
 def _view_cut(args) -> dict:
-    return {"error_bound": args.error_bound, "alpha": args.alpha, "criterion": args.criterion,
-            "interpolation": args.interpolation, "target_psnr": args.target_psnr, "outside": args.outside}
+    return {"criterion": cli_args.criterion(args), "interpolation": args.interpolation, "outside": args.outside}
 
 
 def _draw_options(args) -> dict:

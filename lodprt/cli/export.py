@@ -49,9 +49,7 @@ def cmd_export(args) -> int:
     store = open_store(args.store)
     stats = export_glb(store, args.out, sample=args.sample, lights=args.light, colors=args.color, eye=args.eye,
                        target=args.target, up=args.up, fov=args.fov, size=args.size, lod=not args.full,
-                       error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
-                       interpolation=args.interpolation,
-                       target_psnr=args.target_psnr, outside=args.outside,
+                       criterion=cli_args.criterion(args), interpolation=args.interpolation, outside=args.outside,
                        vertex_colors=args.vertex_colors, white=args.white, exposure=args.exposure,
                        overwrite=args.overwrite)
     mapping = (f"white {stats['white']:.4g}" if "white" in stats else f"scale {stats['color_scale']:.4g}")

@@ -44,10 +44,8 @@ def cmd_frames(args) -> int:
     cli_args.at_least("--frames", args.frames, 1)
     cli_args.at_least("--error-every", args.error_every, 0, " (0: no image error)")
     store = open_store(args.store)
-    rt = _runtime(store, error_bound=args.error_bound, alpha=args.alpha, criterion=args.criterion,
-                  triangle_budget=args.triangle_budget, device=args.device, lod=not args.full,
-                  interpolation=args.interpolation,
-                  target_psnr=args.target_psnr, outside=args.outside)
+    rt = _runtime(store, criterion=cli_args.criterion(args), triangle_budget=args.triangle_budget,
+                  device=args.device, lod=not args.full, interpolation=args.interpolation, outside=args.outside)
     errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
     try:
@@ -104,9 +102,9 @@ def _frames_summary(args, rt, store, rows) -> dict:
 
     ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
     tris = np.array([r["triangles"] for r in rows])
-    summary = {"frames": len(rows), "path": args.path, "lod": not args.full, "criterion": rt.criterion,
+    summary = {"frames": len(rows), "path": args.path, "lod": not args.full, "criterion": rt.criterion.name,
                "interpolation": rt.interpolation, "target_psnr": rt.target_psnr, "error_bound": rt.error_bound,
-               "alpha": args.alpha,
+               "alpha": rt.alpha,
                "first_frame_ms": rows[0]["ms_total"],
                "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
                "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
@@ -127,7 +125,7 @@ def _print_frames(rows, summary, rt) -> None:
         err = f" {r['psnr_db']:>8.1f}" if "psnr_db" in r else (" " * 9 if has_err else "")
         print(f"{r['frame']:>5} {r['triangles']:>9,} {r['nodes_touched']:>8,} {r['ms_cut']:>7.2f} "
               f"{r['ms_triangulate']:>7.2f} {r['ms_relight']:>8.2f} {r['ms_total']:>8.2f}{err}")
-    what = "full mesh" if not summary["lod"] else f"{rt.criterion} criterion, bound {rt.error_bound:.3g}"
+    what = "full mesh" if not summary["lod"] else f"{rt.criterion.name} criterion, bound {rt.error_bound:.3g}"
     if summary["lod"] and rt.target_psnr is not None:
         what += f" (steered toward an estimated {rt.target_psnr:g} dB)"
     print(f"{what}: median {summary['median_ms']:.2f} ms per frame after the first "

@@ -13,8 +13,8 @@ from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.sources import frame_source
 
 
-def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+def compare_figure(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float | None = None,
+                   criterion="screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
                    outside: str = "clamp",
                    overwrite: bool = False, scale: float | None = None, wireframe: bool = False,
                    per_vertex: bool = False, exposure: float = 0.0, white: float | None = None,
@@ -32,9 +32,9 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     check_scale(scale)
     if out.suffix.lower() == ".exr":
         check_exr()
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=True, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
-    error_bound = getattr(source, "error_bound", error_bound)
+    source = frame_source(store, criterion=criterion, lod=True, interpolation=interpolation, outside=outside,
+                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
+    cut_criterion = getattr(source, "criterion", None)  # None: a store without a hierarchy
     source.set_lights(lights, colors)
     source.set_camera(camera)
     lod = source.update()
@@ -57,10 +57,10 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     panels = [img_lod, img_full, false_colour(rel, vmax, covered)]
     titles = [f"view cut: {n_lod:,} triangles ({len(lod.positions):,} vertices)", f"full resolution: {n_full:,} triangles",
               ERROR_LABEL]
-    if error_bound is None:  # a store without a hierarchy: no view cut, both panels are full resolution
+    if cut_criterion is None:  # a store without a hierarchy: no view cut, both panels are full resolution
         what = "no hierarchy (full resolution both)"
     else:
-        what = f"{criterion} criterion, error bound {error_bound:g}" + (f", alpha {alpha:g}" if criterion == "thesis" else "")
+        what = cut_criterion.describe()
     panel_figure(out, panels, titles, vmax,
                  f"{what}: PSNR {numbers['psnr_db']:.1f} dB (clipped at white), relative RMSE "
                  f"{numbers['relative_rmse']:.4f}, mean {numbers['mean_difference']:.4f}\n"

@@ -58,7 +58,7 @@ def check_glb_output(out, overwrite: bool) -> Path:
 
 def export_frame(store, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                  up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
-                 error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
+                 error_bound: float | None = None, alpha: float | None = None, criterion="screen",
                  interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None, outside: str = "clamp"):
     """(frame, source) for the export: the run time (or full-resolution frames for stores without a hierarchy)
     exactly as ``lodprt render`` draws it. ``sample`` K lights the scene with stored light sample K with the bake's
@@ -79,8 +79,8 @@ def export_frame(store, *, sample: int | None = None, lights=None, colors=None, 
     eye = tuple(eye) if eye is not None else default_eye(store)
     target = tuple(target) if target is not None else scene_centre(store)
     camera = Camera(eye=eye, target=target, up=tuple(up), fov=fov, width=int(size[0]), height=int(size[1]))
-    source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
+    source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation, outside=outside,
+                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     return source.update(), source
@@ -264,7 +264,7 @@ def write_glb(frame, out, *, vertex_colors: str = "display", white: float | None
 
 def export_glb(store, out, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
-               error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
+               error_bound: float | None = None, alpha: float | None = None, criterion="screen",
                interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
                outside: str = "clamp",
                vertex_colors: str = "display", white: float | None = None, exposure: float = 0.0,

@@ -127,8 +127,8 @@ class VideoWriter:
         self.partial.unlink(missing_ok=True)
 
 
-def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                   criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+def render_to_file(store, out, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float | None = None,
+                   criterion="screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
                    outside: str = "clamp",
                    lod: bool = True, overwrite: bool = False, **draw) -> dict:
     """``lodprt render``: one frame of ``store`` (view cut unless ``lod`` is False) to ``out`` (.png tone-mapped;
@@ -154,8 +154,8 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
 
 
 def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, light_turns: float = 1.0,
-              fps: float = 12.0, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-              criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+              fps: float = 12.0, error_bound: float | None = None, alpha: float | None = None, lod: bool = True,
+              criterion="screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
               outside: str = "clamp",
               overwrite: bool = False, **draw) -> Path:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights

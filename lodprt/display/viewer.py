@@ -33,6 +33,7 @@ from lodprt.display.render import Renderer
 from lodprt.runtime.camera import rotate_about
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
+from lodprt.runtime.criteria import CRITERIA, make_criterion, resolve_criterion
 from lodprt.runtime.sources import frame_source
 
 log = logging.getLogger(__name__)
@@ -84,16 +85,19 @@ class Slider:
 SLIDER_MARGIN, SLIDER_ROW, SLIDER_LABEL, SLIDER_VALUE = 6, 16, 72, 44  # pixels: edge gap, row height, text widths
 
 
-def slider_layout(width: int, height: int, *, alpha: bool = True) -> tuple[Slider, ...]:
-    """The error-bound and (with ``alpha``, the thesis criterion's knob) alpha sliders in the bottom-left corner of a
-    ``width`` x ``height`` pixel window: a label column, the track, then the value; the track is 160 pixels wide,
-    less in a narrow window (at least 40)."""
+def slider_layout(width: int, height: int, *, alpha: bool = True, knobs=None) -> tuple[Slider, ...]:
+    """A criterion's sliders in the bottom-left corner of a ``width`` x ``height`` pixel window: one per knob with
+    a range (``knobs``: ``Criterion.KNOBS``; default the error bound and, with ``alpha``, the thesis criterion's
+    alpha), each a label column, the track, then the value; the track is 160 pixels wide, less in a narrow window
+    (at least 40)."""
     track = max(40, min(160, width - 2 * SLIDER_MARGIN - SLIDER_LABEL - SLIDER_VALUE - 8))
     x0 = SLIDER_MARGIN + 4 + SLIDER_LABEL
-    rows = (("error_bound", "error bound"), ("alpha", "alpha"))[: 2 if alpha else 1]
+    if knobs is None:
+        knobs = CRITERIA["thesis" if alpha else "screen"].KNOBS
+    rows = [(k.name, k.name.replace("_", " "), k.range) for k in knobs if k.range is not None]
     top = height - SLIDER_MARGIN - 4 - SLIDER_ROW * len(rows)
-    return tuple(Slider(name, label, (x0, top + i * SLIDER_ROW + 2, track, SLIDER_ROW - 4))
-                 for i, (name, label) in enumerate(rows))
+    return tuple(Slider(name, label, (x0, top + i * SLIDER_ROW + 2, track, SLIDER_ROW - 4), *span)
+                 for i, (name, label, span) in enumerate(rows))
 
 
 def _slider_panel(sliders, values) -> tuple[object, tuple[int, int]]:
@@ -190,7 +194,7 @@ class ViewerState:
     colors: np.ndarray | None
     error_bound: float
     alpha: float
-    criterion: str = "screen"  # the view cut's; alpha is a knob of "thesis" only
+    criterion: str = "screen"  # the view cut's name (``lodprt.runtime.criteria.CRITERIA``); alpha is "thesis"'s
     lod: bool = True
     wireframe: bool = False
     per_vertex: bool = False
@@ -203,12 +207,15 @@ class ViewerState:
     # -- sliders and the keys that change the same values -------------------------------------------------------
     def sliders(self) -> tuple[Slider, ...]:
         """The sliders laid out for the current window (camera) size, in its pixels."""
-        return slider_layout(self.camera.width, self.camera.height, alpha=self.criterion == "thesis")
+        return slider_layout(self.camera.width, self.camera.height, knobs=CRITERIA[self.criterion].KNOBS)
+
+    def has_knob(self, name: str) -> bool:
+        """Whether the active criterion has the knob ``name`` (its ``KNOBS``; alpha only for "thesis")."""
+        return name in {k.name for k in CRITERIA[self.criterion].KNOBS}
 
     def knobs(self) -> str:
-        """The active criterion and its knobs, as the overlay prints them (alpha only for "thesis")."""
-        return f"{self.criterion} criterion, error bound {self.error_bound:.4g}" + (
-            f", alpha {self.alpha:.2f}" if self.criterion == "thesis" else "")
+        """The active criterion and its knobs, as the overlay prints them (``Criterion.describe``)."""
+        return make_criterion(self.criterion, error_bound=self.error_bound, alpha=self.alpha).describe()
 
     def set_value(self, name: str, value: float) -> None:
         """Error bound (>= 0) or alpha (clamped to [0, 1]); what the sliders and the keys both go through."""
@@ -224,7 +231,7 @@ class ViewerState:
 
     def step_alpha(self, up: bool) -> None:
         """``.`` / ``,``: alpha + or - 0.05 within [0, 1] (the thesis criterion only: the others have no alpha)."""
-        if self.criterion != "thesis":
+        if not self.has_knob("alpha"):
             return
         self.set_value("alpha", round(self.alpha + (0.05 if up else -0.05), 10))
 
@@ -325,8 +332,9 @@ class ViewerState:
 class Viewer:
     """The window loop: events change a ``ViewerState``; a changed state asks the run time for a new frame."""
 
-    def __init__(self, store, *, lights, camera, colors=None, error_bound: float | None = None, alpha: float = 0.6,
-                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
+    def __init__(self, store, *, lights, camera, colors=None, criterion="screen",
+                 interpolation: str = DEFAULT_INTERPOLATION, error_bound: float | None = None,
+                 alpha: float | None = None, target_psnr=None,
                  outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True):
@@ -338,13 +346,11 @@ class Viewer:
         import moderngl_window
         from moderngl_window.conf import settings
 
-        if error_bound is None:
-            from lodprt.runtime.session import DEFAULT_ERROR_BOUND
-
-            error_bound = DEFAULT_ERROR_BOUND.get(criterion, 0.25)
+        criterion = resolve_criterion(criterion, error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
         self.state = ViewerState(camera=camera, lights=np.asarray(lights, np.float64).reshape(-1, 3).copy(),
                                  colors=None if colors is None else np.asarray(colors, np.float64).reshape(-1, 3),
-                                 error_bound=error_bound, alpha=alpha, criterion=criterion, lod=lod,
+                                 error_bound=criterion.error_bound, alpha=getattr(criterion, "alpha", 0.6),
+                                 criterion=criterion.name, lod=lod,
                                  wireframe=wireframe,
                                  per_vertex=per_vertex, markers=light_markers, exposure=exposure)
         self.home = camera
@@ -356,8 +362,8 @@ class Viewer:
             self.window = moderngl_window.create_window_from_settings()
         except Exception as exc:  # no X server behind DISPLAY, no GLX, no OpenGL 3.3
             raise LodprtError(f"cannot open a window on DISPLAY={os.environ.get('DISPLAY')!r}: {exc}") from exc
-        self.source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                                   interpolation=interpolation, target_psnr=target_psnr)  # after the window: fail fast
+        self.source = frame_source(store, criterion=criterion, lod=lod,
+                                   interpolation=interpolation)  # after the window: fail fast
         w = self.window
         self.renderer = Renderer(w.ctx)
         self.overlay = _Overlay(w.ctx)

@@ -115,6 +115,35 @@ class Relighting:
                                     self.visibility_array(), coeffs, eye=eye, radiance=radiance, eye_basis=eye_basis,
                                     threads=launch)
 
+    def relight_vertices(self, vid: np.ndarray, eye, arrays: dict, frame_inputs, launch) -> tuple[np.ndarray,
+                                                                                                  np.ndarray]:
+        """(A, 3, ncoef) interpolated coefficients and (A, 3) radiance toward ``eye`` of vertices ``vid`` under the
+        current lights (``lodprt.kernels.runtime.relight``, T-7; with a direct term, over the samples' residuals,
+        then ``kernels.direct.direct_light``: M-1). ``arrays``: the device's "positions", "normals" and "coeffs"
+        (the sample slots); ``frame_inputs()``: the slots in use and every slot's weight on the device;
+        ``launch(kernel, rows, inputs, outputs)`` splits a kernel over rows."""
+        from lodprt.devices import warp
+        from lodprt.kernels import runtime as kr
+
+        wp, dev = warp(), self.device
+        A = len(vid)
+        if not self.uses_samples:  # M-1 on a direct-only store: the direct term alone
+            coef = wp.zeros((A, 3, self.ncoef), dtype=wp.float32, device=dev)
+            rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
+            if A:
+                self.add_direct(vid, coef, eye=eye, radiance=rad, launch=launch)
+            return coef.numpy(), rad.numpy()
+        coef = wp.empty((A, 3, self.ncoef), dtype=wp.float32, device=dev)  # every entry is written
+        rad = wp.empty((A, 3), dtype=wp.float32, device=dev)
+        if A:
+            used, weights = frame_inputs()
+            basis = wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)  # toward the eye, filled by relight
+            launch(kr.relight, A, [
+                wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), arrays["positions"], arrays["normals"],
+                wp.vec3(*map(float, eye)), used, weights, arrays["coeffs"], basis], [coef, rad])
+            self.add_direct(vid, coef, eye=eye, radiance=rad, eye_basis=basis, launch=launch)  # M-1
+        return coef.numpy(), rad.numpy()
+
     def coefficients(self, vertex_ids) -> np.ndarray:
         """(K, 3, ncoef) float32 RGB coefficients of the current lights at ``vertex_ids``: ``sum_j W[j, c] C_j``
         over the completed light samples (T-12 weights, intensities applied), plus the direct term (M-1)."""

@@ -1,14 +1,18 @@
 """The ``Runtime`` (SPEC 5; thesis 3.4, T-12..T-15; seed 003 section 5; S-1, S-2 beyond the thesis): relight a
 baked scene with moving point lights and move a view-dependent cut of the vertex hierarchy every frame.
 
-    rt = lodprt.Runtime(lodprt.open_store("bunny.zarr"))          # criterion "screen", bound 0.8 of white
+    rt = lodprt.Runtime(lodprt.open_store("bunny.zarr"))          # ScreenCriterion(), bound 0.8 of white
     rt.set_lights([(0.1, 0.28, 0.0)], colors=[(1.0, 0.9, 0.8)])
     rt.set_camera((0, 0.3, 0.6), (0, 0.1, 0), fov=40, width=800, height=600)
     frame = rt.update()          # Frame: positions, triangles, coefficients, radiance, stats
 
 A frame: light weights (T-12), refine/coarsen passes over the cut's candidates with errors from the Warp kernel
 ``kernels.runtime.view_errors`` (T-13 culling; S-1/S-2 or T-14), incremental triangulation, relighting of the
-active vertices (T-7). The equations and the measured behaviour are in docs/RUNTIME.md and docs/THEORY.md.
+active vertices (T-7). The parts have modules of their own: the criterion (``lodprt.runtime.criteria``: its
+settings, the per-node bounds it reads, its kernel inputs), when to refresh errors and how to move the cut
+(``lodprt.runtime.refinement``: ``ErrorCache``, ``CutRefinement``), the lights, their samples and the relighting
+(``lodprt.runtime.relighting``); the ``Runtime`` holds them, the device arrays and the camera, and runs the
+frame. The equations and the measured behaviour are in docs/RUNTIME.md and docs/THEORY.md.
 """
 
 from __future__ import annotations
@@ -25,8 +29,10 @@ import numpy as np
 from lodprt.errors import LodprtError
 from lodprt.runtime import node_bounds
 from lodprt.runtime import frame_error
+from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
 from lodprt.runtime.frames import Frame
+from lodprt.runtime.refinement import HYSTERESIS, REFRESH_FRAMES, CutRefinement, ErrorCache
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
 from lodprt.runtime.samples import default_white
@@ -35,39 +41,14 @@ from lodprt.runtime.view_cut import Cut
 
 log = logging.getLogger(__name__)
 
-#: splits per pass after the first frame: the most wanted nodes (largest error) are forced first, the rest wait for
-#: the next frame, so that no frame stalls on a burst of refinement (the first frame converges in full)
-FRAME_SPLITS = 4096
-#: a candidate whose cached error is far from the bound (outside [bound / NEAR, bound * NEAR]) is evaluated again
-#: every REFRESH_FRAMES frames (a rotating slice each frame); nearer ones, new ones and every node after a jump of
-#: the camera or the lights (JUMP) are evaluated every frame (temporal coherence, docs/RUNTIME.md)
-REFRESH_FRAMES = 4
-NEAR = 2.0
 #: a camera move of more than JUMP of its distance to the target, or a change of the light weights by more than
 #: LIGHT_JUMP of their sum, counts as a jump
 JUMP = 0.1
 LIGHT_JUMP = 0.4
-#: a node is collapsed only when its error is at most bound / HYSTERESIS (and split above the bound): a node near
-#: the bound does not flip every frame as the camera moves, which would cost collapses, splits and retriangulation
-HYSTERESIS = 1.25
-#: a failed collapse of a node with more original edges under it than this backs off for a few frames
-BACKOFF_EDGES = 20_000
 #: E-4: steering rounds of the first frame with a target_psnr (each converges the cut for the new bound)
 FIRST_ROUNDS = 12
 #: E-4: the relative change of the bound below which the steering keeps it
 STEER_STEP = 0.1
-#: view-cut criteria: "screen" (S-1, docs/RUNTIME.md) bounds what reaches the screen; "thesis" is T-14
-CRITERIA = ("screen", "thesis")
-#: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
-DEFAULT_ERROR_BOUND = {"screen": 0.8, "thesis": 0.25}
-#: "screen": the geometric error on screen, pixels, that weighs as much as the default bound (the exchange rate
-#: between pixels of displacement and units of white: 1 px = the default bound)
-PIXEL_TOLERANCE = 1.0
-#: "screen": the share of the screen a node may cover at the bound's per-pixel error; a larger node's shading term
-#: grows with sqrt(area / (AREA_SHARE W H)), so its squared error summed over its pixels stays under
-#: bound^2 AREA_SHARE W H (S-1): it adds at most bound^2 AREA_SHARE to the frame's mean squared error
-AREA_SHARE = 1.0 / 32768
-
 
 class NodeErrors(typing.NamedTuple):
     """Per candidate node (K,): culled (T-13 or outside the frustum), error (the criterion's, compared with the
@@ -86,11 +67,11 @@ class NodeErrors(typing.NamedTuple):
 class Runtime:
     """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
 
-    criterion: "screen" (default; S-1: the shading a coarse node could get wrong (S-2), weighted by the pixels it
-    covers (above AREA_SHARE of the screen by the square root of its area), and its geometric error in pixels at
-    ``pixel_tolerance`` per default bound, each against the bound) or "thesis" (T-14: ``alpha e_geo + (1 - alpha)
-    e_lumi``); error_bound: refine above, coarsen at or below bound / HYSTERESIS (None: the criterion's default,
-    DEFAULT_ERROR_BOUND; for "screen" in display units of white); alpha in [0, 1] weighs e_geo against e_lumi;
+    criterion: a ``lodprt.runtime.criteria.Criterion`` (default ``ScreenCriterion()``: S-1 with S-2; or
+    ``ThesisCriterion``: T-14) holding its settings, or its name ("screen", "thesis") with the settings as keywords:
+    error_bound (refine above, coarsen at or below bound / HYSTERESIS; None: the criterion's default), alpha
+    (T-14's weight of e_geo, "thesis"), pixel_tolerance and target_psnr ("screen": steer the bound toward this
+    estimated PSNR of the frame against the full mesh, E-1..E-4, ``error_bound`` being the starting bound);
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
@@ -100,35 +81,26 @@ class Runtime:
     fewer than one frame's samples): a sample is completed (T-15) when the lights first give it a weight
     (``lodprt.runtime.samples.SampleCache``);
     progress(done, total): called as the light samples a frame needs are completed;
-    target_psnr: with the screen criterion, steer the bound toward this estimated PSNR of the frame against the
-    full mesh (E-1..E-4, ``lodprt.runtime.frame_error``; ``error_bound`` is then the starting bound);
     interpolation: how a light between samples is lit (``lodprt.runtime.direct_light.INTERPOLATIONS``): "direct"
     (default: the light's direct Phong radiance in closed form times a shadow ray's visibility, plus the samples'
     interpolated residual, M-1, M-2), "direct-agree" (rays only where the samples disagree, M-3), "direct-blend"
     (no rays, M-4), or "thesis" (T-12: the samples' radiance blended).
     """
 
-    def __init__(self, store, *, error_bound: float | None = None, alpha: float = 0.6, criterion: str = "screen",
-                 pixel_tolerance: float = PIXEL_TOLERANCE, triangle_budget: int | None = None,
+    def __init__(self, store, *, error_bound: float | None = None, alpha: float | None = None,
+                 criterion: str | Criterion = "screen", pixel_tolerance: float | None = None,
+                 triangle_budget: int | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 1,
                  lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None,
                  interpolation: str = DEFAULT_INTERPOLATION, target_psnr: float | None = None):
         from lodprt.devices import resolve_device
 
-        if criterion not in CRITERIA:
-            raise LodprtError(f"criterion {criterion!r}: choose one of {', '.join(CRITERIA)}")
-        self.criterion = criterion
-        p = float(pixel_tolerance)
-        if not p > 0 or not math.isfinite(p):
-            raise LodprtError(f"pixel_tolerance {pixel_tolerance}: must be a positive number of pixels")
-        self.pixel_tolerance = p
-        self.target_psnr = frame_error.check_target(target_psnr)
-        if self.target_psnr is not None and (criterion != "screen" or triangle_budget is not None):
-            raise LodprtError("target_psnr steers the screen criterion's bound: not with criterion 'thesis' or a "
-                              "triangle_budget")
+        #: the view cut's criterion, with its settings (the steering replaces it with one of another bound)
+        self.criterion = resolve_criterion(criterion, error_bound=error_bound, alpha=alpha,
+                                           pixel_tolerance=pixel_tolerance, target_psnr=target_psnr)
+        if self.criterion.steered() and triangle_budget is not None:
+            raise LodprtError("target_psnr steers the screen criterion's bound: not with a triangle_budget")
         self.estimated_psnr = None  # E-3 of the last estimate (target_psnr set)
-        if error_bound is None:
-            error_bound = DEFAULT_ERROR_BOUND[criterion]
         self.device = resolve_device(device)
         self.store = store
         self.h = h = store.hierarchy()
@@ -137,7 +109,6 @@ class Runtime:
         self.normals = np.asarray(store.normals, np.float64)
         self._pos32, self._nrm32 = self.positions.astype(np.float32), self.normals.astype(np.float32)  # frames
         self.bounds = np.array([self.positions.min(0), self.positions.max(0)]) if len(self.positions) else np.zeros((2, 3))
-        self.set_error_bound(error_bound, alpha)
         if triangle_budget is not None and int(triangle_budget) < 1:
             raise LodprtError(f"triangle_budget {triangle_budget}: must be >= 1")
         self.triangle_budget = None if triangle_budget is None else int(triangle_budget)
@@ -167,27 +138,23 @@ class Runtime:
         self.half = h.cone_half_angle.astype(np.float64)
         self.radius = h.radius.astype(np.float64)
         self._upload()
-        self.cut = Cut.base(h, self.faces) if self.lod else Cut.full(h, self.faces)
-        self._converged_once = False
-        self._blocker = np.full(h.num_nodes, -1, np.int64)  # a finer neighbour that blocked this collapse
-        self._fails = np.zeros(h.num_nodes, np.int8)  # failed collapses in a row, and when to try again
-        lr = h.leaf_range
-        self._subtree_edges = self.cut.edge_offsets[lr[:, 1]] - self.cut.edge_offsets[lr[:, 0]]
-        self._retry_at = np.zeros(h.num_nodes, np.int64)
+        cut = Cut.base(h, self.faces) if self.lod else Cut.full(h, self.faces)
+        #: how the cut moves (refine/coarsen passes) and when a candidate's error is evaluated again
+        self.refinement = CutRefinement(h, cut, self.device, self.max_passes)
+        self.errors = ErrorCache(h.num_nodes)
         self._tri = IncrementalTriangulation(h, self.faces, self.device)  # T-3.2, what changed only
-        self._dirty, self._settled = True, False
-        self._frame = 0  # errors cached per frame: culled, error and the frame they belong to
-        self._culled = np.zeros(h.num_nodes, bool)
-        self._err = np.zeros(h.num_nodes)
-        self._stamp = np.full(h.num_nodes, -1, np.int64)
-        self._refresh_all = True  # the next frame evaluates every candidate (set by jumps and new bounds)
         self.camera: Camera | None = None
         self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
-            self._node_bounds("detail" if criterion == "screen" else "box_centre")
+            self._node_bounds(self.criterion.NODE_BOUNDS[0])
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
     # -- set-up ------------------------------------------------------------------------------------------------
+    @property
+    def cut(self) -> Cut:
+        """The current view cut (``lodprt.runtime.view_cut.Cut``)."""
+        return self.refinement.cut
+
     @property
     def box_centre(self) -> np.ndarray:
         """T-14 coefficient box centres (N - V, slots, C, ncoef) float16 (``node_bounds.coefficient_boxes``), one
@@ -241,7 +208,7 @@ class Runtime:
         """The view_errors kernel's box_centre, box_half and detail arrays: the ones its criterion reads (and the
         boxes too when ``exact``, which evaluates every term); a one-row placeholder of the same width for the
         others, which the kernel then never indexes."""
-        need = {"detail"} if self.criterion == "screen" else {"box_centre", "box_half"}
+        need = set(self.criterion.NODE_BOUNDS)
         if exact:
             need |= {"box_centre", "box_half"}
         if "placeholder" not in self._d:
@@ -296,30 +263,38 @@ class Runtime:
         used = wp.array(self.used_slots.astype(np.int32), dtype=wp.int32, device=self.device)
         return used, wp.array(weights, dtype=wp.float32, device=self.device)
 
+    @property
+    def error_bound(self) -> float:
+        """The criterion's error bound (steered by a target_psnr or a triangle_budget)."""
+        return self.criterion.error_bound
+
+    @error_bound.setter
+    def error_bound(self, value: float) -> None:
+        self.criterion = self.criterion.with_bound(value)
+
+    @property
+    def alpha(self) -> float:
+        """T-14's weight of e_geo ("thesis"; the default 0.6 for a criterion without one)."""
+        return getattr(self.criterion, "alpha", ThesisCriterion.alpha)
+
+    @property
+    def target_psnr(self) -> float | None:
+        """The screen criterion's target (E-4), or None."""
+        return getattr(self.criterion, "target_psnr", None)
+
     def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
-        """The criterion's error bound (>= 0) and, when given, alpha in [0, 1] (T-14's weight of e_geo)."""
-        e = float(error_bound)
-        if not e >= 0 or not math.isfinite(e):
-            raise LodprtError(f"error_bound {error_bound}: must be a finite number >= 0")
-        self.error_bound = e
-        self._dirty = True
-        self._refresh_all = True
-        if alpha is not None:
-            a = float(alpha)
-            if not 0.0 <= a <= 1.0:
-                raise LodprtError(f"alpha {alpha}: must lie in [0, 1]")
-            self.alpha = a
+        """The criterion's error bound (>= 0) and, when given, alpha in [0, 1] (T-14's weight of e_geo; checked
+        and unread by a criterion without one)."""
+        new = self.criterion.with_bound(error_bound)
+        self.criterion = new if alpha is None else new.with_alpha(alpha)
+        self.refinement.dirty = True
+        self.errors.refresh_all = True
 
     def set_lod(self, enabled: bool) -> None:
         """LOD off shows the full mesh (every leaf active); on starts again from the base mesh."""
         self.lod = bool(enabled)
-        self.cut = Cut.base(self.h, self.faces) if self.lod else Cut.full(self.h, self.faces)
-        self._converged_once = False
-        self._blocker[:] = -1
-        self._fails[:] = 0
-        self._retry_at[:] = 0
-        self._dirty = True
-        self._refresh_all = True
+        self.refinement.reset(Cut.base(self.h, self.faces) if self.lod else Cut.full(self.h, self.faces))
+        self.errors.refresh_all = True
 
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
@@ -328,9 +303,9 @@ class Runtime:
         old = lit.weights
         lit.set_lights(positions, colors)  # completes the samples not held yet (T-15)
         W = lit.weights
-        self._dirty = True
+        self.refinement.dirty = True
         if old is None or old.shape != W.shape or np.abs(W - old).sum() > LIGHT_JUMP * max(np.abs(old).sum(), 1e-30):
-            self._refresh_all = True
+            self.errors.refresh_all = True
         self.light_positions, self.light_colors, self.lights_clamped = lit.positions, lit.colors, lit.clamped
         self.sample_weights, self.used_samples, self.used_slots = W, lit.used_samples, lit.used_slots
 
@@ -342,9 +317,9 @@ class Runtime:
             self._centre = scene_centre(self.store)
         self.camera = self.lighting.watch_eye(camera_for(camera, eye=eye, target=target, default_target=self._centre,
                                                          up=up, fov=fov, width=width, height=height, near=near, far=far))
-        self._dirty = True
+        self.refinement.dirty = True
         if old is None or camera_jump(old, self.camera, JUMP):
-            self._refresh_all = True
+            self.errors.refresh_all = True
         self.vp = view_projection(self.camera, self.bounds)
         self.planes = clip_planes(self.vp)
         return self.camera
@@ -370,117 +345,31 @@ class Runtime:
             cam = self.camera
             used, weights = self._frame_inputs()
             bounds = self._kernel_bounds(exact)
+            mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height)
             self._launch(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
                 d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
-                *bounds, CRITERIA.index(self.criterion), int(self.interpolation != "thesis"),
+                *bounds, mode, int(self.interpolation != "thesis"),
                 wp.array(self.lighting.bracket_mask(), dtype=wp.int32, device=dev),
                 2 if detail_only else int(bool(exact)),
-                float(self.error_bound), float(HYSTERESIS), self.geo_rate(), self.area_ref(), self.alpha,
+                float(self.error_bound), float(HYSTERESIS), geo_rate, area_ref, alpha,
                 wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
             ], outs)
         culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
         return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))
-
-    def geo_rate(self) -> float:
-        """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance; with a
-        target_psnr the steered bound's, so that the geometric error stays at pixel_tolerance pixels)."""
-        bound = self.error_bound if self.target_psnr is not None else DEFAULT_ERROR_BOUND["screen"]
-        return max(bound, 1e-12) / self.pixel_tolerance
-
-    def area_ref(self) -> float:
-        """S-1: the pixels a node may cover before its shading term grows (AREA_SHARE of the screen)."""
-        return AREA_SHARE * self.camera.width * self.camera.height
 
     def focal_px(self) -> float:
         """Focal length of the camera in pixels: (height / 2) / tan(fov / 2)."""
         return 0.5 * self.camera.height / math.tan(math.radians(self.camera.fov) / 2)
 
     # -- frames ------------------------------------------------------------------------------------------------
-    def _pass(self, *, backoff: bool = False) -> tuple[int, int, int]:
-        """One refinement pass over the candidate lists; returns (refined, coarsened, nodes touched). With
-        ``backoff``, a failed collapse of a node whose subtree has more than BACKOFF_EDGES original edges is not
-        tried again for 2, 4, ... 32 frames (a try scans them all); smaller ones are tried again as soon as their
-        blocker has gone."""
-        h, cut = self.h, self.cut
-        V = h.num_vertices
-        act = np.flatnonzero(cut.active)
-        rc = act[act >= V]  # Refine-Candidates
-        par = h.parent[act]
-        first = (par >= 0) & (h.children[np.maximum(par, 0), 0] == act)  # each parent once, through its child 0
-        par = par[first]
-        cc = par[cut.active[h.children[par, 1]]]  # Coarsen-Candidates: both children active
-        nodes = np.concatenate([rc, cc])
-        if not len(nodes):
-            return 0, 0, 0
-        # errors depend on the frame's camera and lights only: each node is evaluated at most once per frame, and
-        # after the first frame (no jump since) one far from the bound only every REFRESH_FRAMES frames
-        fresh = self._stamp[nodes] != self._frame
-        if self._converged_once and not self._refresh_all:
-            e, b = self._err[nodes], self.error_bound
-            due = (self._stamp[nodes] < 0) | (self._frame - self._stamp[nodes] >= REFRESH_FRAMES)
-            due |= (nodes + self._frame) % REFRESH_FRAMES == 0
-            due |= ~self._culled[nodes] & (e * NEAR > b) & (e < b * NEAR)
-            fresh &= due
-        if fresh.any():
-            new = nodes[fresh]
-            c, e = self.node_errors(new, exact=False)[:2]
-            self._culled[new], self._err[new], self._stamp[new] = c, e, self._frame
-        culled, err = self._culled[nodes], self._err[nodes]
-        k = len(rc)
-        want_refine = ~culled[:k] & (err[:k] > self.error_bound)
-        want_coarsen = culled[k:] | (err[k:] * HYSTERESIS <= self.error_bound)
-        refined = coarsened = touched = 0
-        # a collapse found blocked waits until the finer neighbour found blocking it is gone (one per node);
-        # collapses, then forced splits, are made in turn by the sequential kernels (Cut.coarsen_list /
-        # force_refine_list), each checked against the cut as it is then
-        todo = cc[want_coarsen]
-        blk = self._blocker[todo]
-        todo = todo[(blk < 0) | ~cut.active[np.maximum(blk, 0)]]
-        if backoff:
-            todo = todo[self._retry_at[todo] <= self._frame]
-        touched += len(todo)
-        if len(todo):
-            done, blocker = cut.coarsen_list(todo, device=self.device)
-            self._blocker[todo] = np.where(done, -1, blocker)
-            big = self._subtree_edges[todo] > BACKOFF_EDGES
-            self._fails[todo] = np.where(done | ~big, 0, np.minimum(self._fails[todo] + 1, 5))
-            self._retry_at[todo] = self._frame + np.where(done | ~big, 0, 2 ** self._fails[todo].astype(np.int64))
-            coarsened += int(done.sum())
-        split = rc[want_refine]
-        split = split[np.argsort(-err[:k][want_refine], kind="stable")]
-        split = split[cut.active[split]]
-        touched += len(split)
-        if len(split):  # largest error first; blocked ones forced, their coarser blockers split first
-            # once the cut has converged a pass makes at most FRAME_SPLITS splits (the rest wait a frame), so that
-            # no frame stalls; the first frame converges in full
-            n = cut.force_refine_list(split, max_splits=FRAME_SPLITS if self._converged_once else None,
-                                      device=self.device)
-            refined += n
-            touched += max(n - len(split), 0)
-        return refined, coarsened, touched
-
     def _converge(self, max_passes: int | None) -> tuple[int, int, int, int]:
-        """Refinement passes until the cut settles or ``max_passes`` (default: max_passes after the first frame,
-        all it takes before): (refined, coarsened, nodes touched, passes)."""
-        refined = coarsened = touched = passes = 0
-        if self.lod and (self._dirty or not self._settled):  # nothing changed since a settled cut: keep it
-            limit = max_passes if max_passes is not None else (self.max_passes if self._converged_once else 10_000)
-            self._settled = False
-            for _ in range(int(limit)):
-                r, c, t = self._pass(backoff=self._converged_once and limit <= self.max_passes)
-                passes += 1
-                refined, coarsened, touched = refined + r, coarsened + c, touched + t
-                if r == 0 and c == 0:
-                    self._settled = True
-                    break
-            self._converged_once = True
-            self._refresh_all = False
-        self._dirty = False
-        return refined, coarsened, touched, passes
+        """``CutRefinement.converge`` with this frame's errors: (refined, coarsened, nodes touched, passes)."""
+        evaluate = lambda nodes: self.node_errors(nodes, exact=False)[:2]  # noqa: E731
+        return self.refinement.converge(self.errors, evaluate, self.error_bound, max_passes, enabled=self.lod)
 
     def _cut_mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut."""
@@ -497,24 +386,24 @@ class Runtime:
         bound is evaluated again when due)."""
         self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri)
         if new is not None and abs(new - self.error_bound) > STEER_STEP * self.error_bound:
-            self.error_bound, self._dirty = new, True
+            self.error_bound, self.refinement.dirty = new, True
 
     def update(self, *, max_passes: int | None = None) -> Frame:
         """Move the cut for the current camera and lights, triangulate it, relight it: a ``Frame``."""
         if self.camera is None:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
         t0 = time.perf_counter()
-        self._frame += 1
-        first, jump = not self._converged_once, self._refresh_all
+        self.errors.frame += 1
+        first, jump = not self.refinement.converged_once, self.errors.refresh_all
         refined, coarsened, touched, passes = self._converge(max_passes)
         t1 = time.perf_counter()
         vid, tri = self._cut_mesh()
         t2 = time.perf_counter()
-        due = first or jump or self._frame % REFRESH_FRAMES == 0  # E-4 every few frames and after a jump
+        due = first or jump or self.errors.frame % REFRESH_FRAMES == 0  # E-4 every few frames and after a jump
         if self.lod and self.target_psnr is not None and due:  # E-4: steer the bound; the first frame until it holds
             for _ in range(FIRST_ROUNDS if first else 1):
                 self.estimate_frame_error(vid, tri)
-                if not first or not self._dirty:
+                if not first or not self.refinement.dirty:
                     break
                 more = self._converge(10_000)
                 refined, coarsened, touched, passes = (a + b for a, b in zip((refined, coarsened, touched, passes),
@@ -525,7 +414,7 @@ class Runtime:
         t3 = time.perf_counter()
         if self.triangle_budget is not None:  # steer the bound toward the budget
             new = frame_error.toward_budget(self.error_bound, len(tri), self.triangle_budget)
-            self.error_bound, self._dirty = new, self._dirty or new != self.error_bound
+            self.error_bound, self.refinement.dirty = new, self.refinement.dirty or new != self.error_bound
         stats = {
             "triangles": int(len(tri)),
             "active_nodes": int(len(self.cut.nodes)),
@@ -550,30 +439,9 @@ class Runtime:
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
 
     def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(A, 3, ncoef) interpolated coefficients and (A, 3) radiance toward the eye of vertices ``vid``
-        (``lodprt.kernels.runtime.relight``; with a direct term, over the samples' residuals, then
-        ``kernels.direct.direct_light``: M-1)."""
-        from lodprt.kernels import runtime as kr
-
-        wp, dev, d = self._wp, self.device, self._d
-        A = len(vid)
-        if not self.lighting.uses_samples:  # M-1 on a direct-only store: the direct term alone
-            coef = wp.zeros((A, 3, self.ncoef), dtype=wp.float32, device=dev)
-            rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
-            if A:
-                self.lighting.add_direct(vid, coef, eye=self.camera.eye, radiance=rad, launch=self._launch)
-            return coef.numpy(), rad.numpy()
-        coef = wp.empty((A, 3, self.ncoef), dtype=wp.float32, device=dev)  # every entry is written
-        rad = wp.empty((A, 3), dtype=wp.float32, device=dev)
-        if A:
-            used, weights = self._frame_inputs()
-            basis = wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)  # toward the eye, filled by relight
-            self._launch(kr.relight, A, [
-                wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), d["positions"], d["normals"],
-                wp.vec3(*map(float, self.camera.eye)), used, weights, d["coeffs"], basis], [coef, rad])
-            self.lighting.add_direct(vid, coef, eye=self.camera.eye, radiance=rad, eye_basis=basis,
-                                     launch=self._launch)  # M-1
-        return coef.numpy(), rad.numpy()
+        """(A, 3, ncoef) coefficients and (A, 3) radiance toward the eye of vertices ``vid``
+        (``Relighting.relight_vertices``: T-7, with the direct term M-1)."""
+        return self.lighting.relight_vertices(vid, self.camera.eye, self._d, self._frame_inputs, self._launch)
 
     # -- full resolution ---------------------------------------------------------------------------------------
     def coefficients(self, vertex_ids=None) -> np.ndarray:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 
+from lodprt.runtime.criteria import resolve_criterion
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.frames import StoreFrames
 from lodprt.runtime.session import Runtime
@@ -12,16 +13,17 @@ from lodprt.runtime.session import Runtime
 log = logging.getLogger(__name__)
 
 
-def frame_source(store, *, error_bound: float | None = None, alpha: float = 0.6, lod: bool = True,
-                 criterion: str = "screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
-                 outside: str = "clamp"):
-    """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut; ``lod``
-    False starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution); both
-    light a light between samples by ``interpolation`` (``lodprt.runtime.direct_light.INTERPOLATIONS``) and treat
-    a light outside the light box by ``outside`` ("clamp" with one warning per source, or "error")."""
+def frame_source(store, *, criterion="screen", lod: bool = True, interpolation: str = DEFAULT_INTERPOLATION,
+                 outside: str = "clamp", error_bound: float | None = None, alpha: float | None = None,
+                 target_psnr=None):
+    """What the display draws from: the run time (``store.runtime``: moving lights, view-dependent cut under
+    ``criterion``, a ``lodprt.runtime.criteria.Criterion`` or a name with its settings as keywords; ``lod`` False
+    starts with the full mesh) when the store has a hierarchy, else ``StoreFrames`` (full resolution); both light a
+    light between samples by ``interpolation`` (``lodprt.runtime.direct_light.INTERPOLATIONS``) and treat a light
+    outside the light box by ``outside`` ("clamp" with one warning per source, or "error")."""
+    criterion = resolve_criterion(criterion, error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
     if store.has_hierarchy:
-        return Runtime(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                       interpolation=interpolation, target_psnr=target_psnr, outside=outside)
+        return Runtime(store, criterion=criterion, lod=lod, interpolation=interpolation, outside=outside)
     if lod:
         log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
     return StoreFrames(store, interpolation=interpolation, outside=outside)
