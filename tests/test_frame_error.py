@@ -90,3 +90,46 @@ def test_bad_target_is_a_clear_error(bunny_store):
         Runtime(bunny_store, device="cpu", target_psnr=-3)
     with pytest.raises(LodprtError, match="not with criterion 'thesis'"):
         Runtime(bunny_store, device="cpu", target_psnr=38, criterion="thesis")
+
+
+def closed_form_psnr(bound):
+    """A frame whose PSNR falls as 20 log10 of the bound (E-1 grows as the bound squared): 40 dB at bound 0.5."""
+    return 40.0 - 20.0 * np.log10(bound / 0.5)
+
+
+@pytest.mark.parametrize("start", [1e-3, 0.05, 0.8, 6.0])
+@pytest.mark.parametrize("target", [30.0, 38.0, 45.0])
+def test_steering_settles_on_the_largest_bound_that_meets_the_target(start, target):
+    """E-4's search on a closed-form frame: from any start it ends on a bound whose PSNR meets the target, within
+    one step of the exact answer 0.5 * 10^((40 - target) / 20), and stays there."""
+    from lodprt.runtime.frame_error import BOUND_RANGE, REPROBE, Steering
+
+    exact = 0.5 * 10 ** ((40.0 - target) / 20.0)
+    s, b = Steering(target, step=0.1), start
+    for rounds in range(40):
+        est = closed_form_psnr(b)
+        b = s.next_bound(b, est, np.array([b]), np.array([10 ** (-est / 10)]), 1.0)  # E-1 = 10^(-E-3 / 10) N
+        assert BOUND_RANGE[0] <= b <= BOUND_RANGE[1]
+        if s.settled():
+            break
+    assert s.settled() and rounds < 25
+    assert closed_form_psnr(b) >= target
+    assert exact / 1.1 <= b <= exact * (1 + 1e-9)
+    for _ in range(REPROBE - 1):  # settled: it keeps the bound for REPROBE rounds, then probes upward once
+        assert s.next_bound(b, closed_form_psnr(b), np.array([b]), np.array([10 ** (-closed_form_psnr(b) / 10)]),
+                            1.0) == b
+
+
+def test_steering_follows_a_frame_that_changes():
+    """A bracket the frame no longer obeys gives way: after the scene gets 6 dB worse at every bound, the search
+    settles again on a bound that meets the target."""
+    from lodprt.runtime.frame_error import Steering
+
+    s, b = Steering(38.0), 0.8
+    for shift in (0.0, -6.0):
+        for _ in range(40):
+            est = closed_form_psnr(b) + shift
+            b = s.next_bound(b, est, np.array([b]), np.array([10 ** (-est / 10)]), 1.0)
+            if s.settled() and closed_form_psnr(b) + shift >= 38.0:
+                break
+        assert s.settled() and closed_form_psnr(b) + shift >= 38.0

@@ -7,9 +7,11 @@ the per-node bound toward a stated PSNR.
           combined as S-2's bounds are, M-5)
     E-2   N   = the pixels the cut's front-facing triangles cover (projected areas, at most W H)
     E-3   PSNR_est = -10 log10(SSE / N)                         (display units of white, as ``frame_error``)
-    E-4   the bound b for the next frames: the largest S-1 error e such that the coarse nodes at or under e add
-          at most 10^(-PSNR / 10) N to E-1 (the rest are refined), raised by RAISE when E-1 is under
-          SLACK of the budget (room to coarsen); never by more than MAX_STEP at once
+    E-4   the bound b for the next frames: the largest bound whose cut's E-3 meets the target, searched by
+          bisection in log b between the largest bound that met it and the smallest that missed (``Steering``);
+          before both are known, the largest S-1 error e such that the coarse nodes at or under e add at most
+          10^(-PSNR / 10) N to E-1 (the rest are refined), or, under SLACK of the budget, b raised by
+          sqrt(budget / E-1) (at least RAISE); never by more than MAX_STEP at once
 
 A coarse node's subtree loses what T-15 cannot rebuild from coarser vertices; the mean of that residual's square
 over its leaves, spread over the pixels the node covers, estimates the squared error the node adds (the S-2 bound,
@@ -31,6 +33,8 @@ from lodprt.errors import LodprtError
 RAISE = 1.15
 SLACK = 0.6
 MAX_STEP = 4.0
+#: E-4: after this many settled steering rounds the search forgets the bound that missed and probes upward again
+REPROBE = 8
 #: the lowest and highest bounds the steering may reach (units of white)
 BOUND_RANGE = (1e-4, 8.0)
 
@@ -72,23 +76,77 @@ def psnr(sse: float, covered: float) -> float:
 
 
 def steer(bound: float, target_psnr: float, err: np.ndarray, sse: np.ndarray, covered: float) -> float:
-    """E-4: the bound for the next frames from the coarse nodes' S-1 errors ``err`` and E-1 terms ``sse``."""
+    """E-4's guess of the bound from one estimate: the largest S-1 error ``err`` whose coarse nodes' E-1 terms
+    ``sse`` stay within the budget (the rest refined) when over it; the bound raised when under it (E-1 grows about
+    as the bound squared, so by sqrt(budget / E-1), at least RAISE); never by more than MAX_STEP at once."""
     budget = 10.0 ** (-target_psnr / 10.0) * max(covered, 1.0)
     total = float(sse.sum())
     if total > budget:
         order = np.argsort(err, kind="stable")
         keep = np.cumsum(sse[order]) <= budget
         new = float(err[order][keep][-1]) if keep.any() else bound / MAX_STEP
+        new = min(new, bound / RAISE)
     elif total < SLACK * budget:
-        new = bound * RAISE
+        new = bound * max(RAISE, math.sqrt(budget / max(total, 1e-30)))
     else:
         new = bound
     new = min(max(new, bound / MAX_STEP), bound * MAX_STEP)
     return float(min(max(new, BOUND_RANGE[0]), BOUND_RANGE[1]))
 
 
-def estimate(rt, positions: np.ndarray, triangles: np.ndarray) -> tuple[float, float | None]:
-    """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames or None without a target) from
+class Steering:
+    """E-4 as a search for the largest bound whose frame meets the target: the bounds tried so far bracket it,
+    ``meets`` (the largest whose estimate reached the target) and ``misses`` (the smallest that did not), and the
+    next bound is their geometric mean once both are known (bisection in log bound), ``steer``'s guess before. The
+    search settles on ``meets`` when the bracket is narrower than ``1 + step``; a bracket the frame no longer obeys
+    (the camera or the lights moved) gives way to the new estimate, ``reset`` forgets it after a jump, and after
+    REPROBE settled rounds it probes upward again (a frame that got easier)."""
+
+    def __init__(self, target_psnr: float, step: float = 0.1):
+        self.target, self.step = float(target_psnr), float(step)
+        self.meets: float | None = None
+        self.misses: float | None = None
+        self.rounds_settled = 0
+
+    def reset(self) -> None:
+        self.meets = self.misses = None
+        self.rounds_settled = 0
+
+    def settled(self) -> bool:
+        return self.meets is not None and self.misses is not None and self.misses <= self.meets * (1 + self.step)
+
+    def next_bound(self, bound: float, estimated_psnr: float, err: np.ndarray, sse: np.ndarray,
+                   covered: float) -> float:
+        """The bound for the next frames after the cut at ``bound`` was estimated at ``estimated_psnr`` (E-3)."""
+        if estimated_psnr >= self.target:
+            self.meets = bound if self.meets is None else max(self.meets, bound)
+            if self.misses is not None and self.misses <= self.meets:
+                self.misses = None  # the frame changed: a bound that missed meets now
+        else:
+            self.misses = bound if self.misses is None else min(self.misses, bound)
+            if self.meets is not None and self.meets >= self.misses:
+                self.meets = None
+        if self.settled():
+            if self.rounds_settled < REPROBE:
+                self.rounds_settled += 1
+                return float(self.meets)
+            self.misses, self.rounds_settled = None, 0  # the frame may have got easier: probe upward again
+        if self.meets is not None and self.misses is not None:
+            return float(math.sqrt(self.meets * self.misses))
+        new = steer(bound, self.target, err, sse, covered)
+        if self.misses is None and estimated_psnr >= self.target:
+            new = max(new, bound * RAISE)  # no bound has missed yet: probe upward
+        if self.misses is not None:
+            new = min(new, self.misses)
+        if self.meets is not None:
+            new = max(new, self.meets)
+        return new
+
+
+def estimate(rt, positions: np.ndarray, triangles: np.ndarray,
+             steering: Steering | None = None) -> tuple[float, float | None]:
+    """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames from ``steering`` or None without
+    one) from
     the cut's coarse nodes (culling, footprint and S-1 error from ``Runtime.node_errors(detail_only=True)``, E-1 from
     ``node_mean_square``) and its mesh (``positions`` of its vertices, ``triangles`` indices into them)."""
     cam = rt.camera
@@ -99,8 +157,9 @@ def estimate(rt, positions: np.ndarray, triangles: np.ndarray) -> tuple[float, f
     area = np.minimum(projected_area(rt, nodes), float(cam.width * cam.height))
     sse = np.where(ne.culled, 0.0, ms * area)
     cov = covered_pixels(positions, triangles, rt.vp, cam.eye, cam.width, cam.height)
-    new = None if rt.target_psnr is None else steer(rt.error_bound, rt.target_psnr, ne.error, sse, cov)
-    return psnr(float(sse.sum()), cov), new
+    est = psnr(float(sse.sum()), cov)
+    new = None if steering is None else steering.next_bound(rt.error_bound, est, ne.error, sse, cov)
+    return est, new
 
 
 _SURFACE: dict = {}  # id(hierarchy) -> (weak reference to it, (N,) surface area under each node)
