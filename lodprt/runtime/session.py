@@ -101,6 +101,9 @@ class Runtime:
         if self.criterion.steered() and triangle_budget is not None:
             raise LodprtError("target_psnr steers the screen criterion's bound: not with a triangle_budget")
         self.estimated_psnr = None  # E-3 of the last estimate (target_psnr set)
+        #: E-4: the search for the largest bound whose frame meets target_psnr (None without a target)
+        self.steering = frame_error.Steering(self.criterion.target_psnr, STEER_STEP) if self.criterion.steered() \
+            else None
         self.device = resolve_device(device)
         self.store = store
         self.h = h = store.hierarchy()
@@ -382,10 +385,10 @@ class Runtime:
 
     def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray) -> None:
         """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr, E-4: the bound for the next
-        frames, changed when it moves by more than STEER_STEP (the cached errors stay: a node cached under the old
-        bound is evaluated again when due)."""
-        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri)
-        if new is not None and abs(new - self.error_bound) > STEER_STEP * self.error_bound:
+        frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the cached errors
+        stay: a node cached under the old bound is evaluated again when due)."""
+        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri, self.steering)
+        if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
 
     def update(self, *, max_passes: int | None = None) -> Frame:
@@ -395,6 +398,8 @@ class Runtime:
         t0 = time.perf_counter()
         self.errors.frame += 1
         first, jump = not self.refinement.converged_once, self.errors.refresh_all
+        if jump and self.steering is not None:  # E-4: after a jump the bounds tried so far say nothing
+            self.steering.reset()
         refined, coarsened, touched, passes = self._converge(max_passes)
         t1 = time.perf_counter()
         vid, tri = self._cut_mesh()
