@@ -28,28 +28,43 @@ MARKER = re.compile(r"^\s*<!--\s*example:\s*not run:(.*?)-->\s*$")
 FENCE = re.compile(r"^(\s*)```(\S*)\s*$")
 PYTHON = {"python", "py"}
 SHELL = {"bash", "sh", "shell", "console"}
+#: Commands and names that draw with OpenGL: their blocks need the ``gl`` fixture.
+GL_USE = re.compile(r"\blodprt (render|compare|diff|turntable|view|render-environment|render-volume)\b|Renderer\(")
+
+
+def parse_blocks(name, text):
+    """The fenced blocks of one markdown text: (name, line of the fence, language, code, marker reason or None)."""
+    blocks, lines, i = [], text.splitlines(), 0
+    while i < len(lines):
+        m = FENCE.match(lines[i])
+        if not m:
+            i += 1
+            continue
+        j = i + 1
+        while j < len(lines) and not lines[j].strip().startswith("```"):
+            j += 1
+        before = next((ln for ln in reversed(lines[:i]) if ln.strip()), "")
+        mark = MARKER.match(before)
+        code = textwrap.dedent("\n".join(lines[i + 1 : j])) + "\n"
+        blocks.append((name, i + 1, m.group(2).lower(), code, mark.group(1).strip() if mark else None))
+        i = j + 1
+    return blocks
 
 
 def collect_blocks():
-    """Every fenced block of README.md and docs/*.md: (file, line of the fence, language, code, marker reason)."""
-    blocks = []
-    for name in DOCS:
-        lines = (REPO / name).read_text().splitlines()
-        i = 0
-        while i < len(lines):
-            m = FENCE.match(lines[i])
-            if not m:
-                i += 1
-                continue
-            j = i + 1
-            while not lines[j].strip().startswith("```"):
-                j += 1
-            before = next((ln for ln in reversed(lines[:i]) if ln.strip()), "")
-            mark = MARKER.match(before)
-            code = textwrap.dedent("\n".join(lines[i + 1 : j])) + "\n"
-            blocks.append((name, i + 1, m.group(2).lower(), code, mark.group(1).strip() if mark else None))
-            i = j + 1
-    return blocks
+    """Every fenced block of README.md and docs/*.md."""
+    return [b for name in DOCS for b in parse_blocks(name, (REPO / name).read_text())]
+
+
+def problems(blocks):
+    """file:line of each block neither run nor marked, and of each marker without a reason."""
+    bad = []
+    for name, line, lang, _, reason in blocks:
+        if reason is not None and not reason:
+            bad.append(f"{name}:{line}: marker with an empty reason")
+        elif reason is None and lang not in PYTHON | SHELL | {"toml"}:
+            bad.append(f"{name}:{line}: ```{lang} block is neither run nor marked <!-- example: not run: REASON -->")
+    return bad
 
 
 BLOCKS = collect_blocks()
@@ -151,7 +166,9 @@ def fixtures(tmp_path_factory):
     (d / "tests").symlink_to(REPO / "tests")
     (d / "bunny.toml").write_text('[[object]]\nmesh = "tests/data/stanford-bunny.obj.xz"\n[floor]\nresolution = 40\n'
                                   "[lights]\ngrid = [3, 1, 3]\n")
-    assert main(["bake", "demo", "-o", str(d / "demo.zarr"), "--sh-order", "4"]) == 0
+    # the README's install line ends with these two commands
+    assert main(["bake", "demo", "-o", str(d / "demo.zarr"), "--overwrite"]) == 0
+    assert main(["info", str(d / "demo.zarr")]) == 0
     assert main(["bake", str(d / "bunny.toml"), "-o", str(d / "bunny.zarr"), "--sh-order", "4"]) == 0
     assert main(["compress", str(d / "bunny.zarr"), "-o", str(d / "bunny_q8.zarr"), "--codec", "q8"]) == 0
     assert main(["bake-environment", str(REPO / "tests/data/spot.obj.xz"), "-o", str(d / "bunny_env.zarr"),
@@ -216,16 +233,20 @@ def run_shell(code, cwd):
 def test_every_block_runs_or_is_marked():
     """A block this test does not run needs the marker, with a reason; a python or shell block is run."""
     assert len(BLOCKS) >= 25, "the fence parser found too few blocks"
-    bad = []
-    for name, line, lang, code, reason in BLOCKS:
-        if reason is not None and not reason:
-            bad.append(f"{name}:{line}: marker with an empty reason")
-        elif reason is None and lang not in PYTHON | SHELL | {"toml"}:
-            bad.append(f"{name}:{line}: ```{lang} block is neither run nor marked <!-- example: not run: REASON -->")
+    bad = problems(BLOCKS)
     keys = {(b[0], first_line(b[3])) for b in BLOCKS}
     for table in (NEEDS, SUBS, CHECKS, PRELUDE):
         bad += [f"{k}: table entry matches no block" for k in table if k not in keys]
     assert not bad, "\n".join(bad)
+
+
+def test_unmarked_or_unexplained_blocks_are_reported():
+    """The check above names the file and line of a plain block without a marker and of a marker without a reason."""
+    text = "# T\n\n```\nsome listing\n```\n\n<!-- example: not run:  -->\n```bash\nlodprt info x.zarr\n```\n"
+    text += "\n<!-- example: not run: needs a GPU -->\n```\nlisting\n```\n\n```python\nprint(1)\n```\n"
+    assert problems(parse_blocks("docs/T.md", text)) == [
+        "docs/T.md:3: ``` block is neither run nor marked <!-- example: not run: REASON -->",
+        "docs/T.md:8: marker with an empty reason"]
 
 
 def test_toml_blocks_parse():
@@ -238,8 +259,10 @@ def test_toml_blocks_parse():
 
 
 @pytest.mark.parametrize("block", RUN, ids=block_id)
-def test_block_runs(block, fixtures, tmp_path):
+def test_block_runs(block, fixtures, tmp_path, request):
     name, line, lang, code, _ = block
+    if GL_USE.search(code):
+        request.getfixturevalue("gl")  # skips, saying so, only where no offscreen OpenGL context can be made
     key = (name, first_line(code))
     workspace(tmp_path, fixtures, key)
     code = apply_subs(key, code)
@@ -253,7 +276,7 @@ def test_block_runs(block, fixtures, tmp_path):
     run_python(PRELUDE.get(key, "") + code + CHECKS.get(key, ""), tmp_path)
 
 
-def test_package_docstring_example(tmp_path):
+def test_package_docstring_example(tmp_path, gl):
     """``help(lodprt)``'s "Public API" example runs (smaller: fewer rays, a coarser volume)."""
     import lodprt
 
