@@ -147,3 +147,18 @@ def test_bad_names_and_settings_are_refused_naming_them(ball_store):
         Runtime(ball_store, device="cpu", criterion=ThesisCriterion(), alpha=0.3)
     with pytest.raises(LodprtError, match="not with a triangle_budget"):
         Runtime(ball_store, device="cpu", criterion=ScreenCriterion(target_psnr=38), triangle_budget=1000)
+
+
+@pytest.mark.parametrize("criterion, knobs, absent", [
+    ("screen", {"error_bound", "target_psnr", "pixel_tolerance"}, {"alpha"}),
+    ("thesis", {"error_bound", "alpha"}, {"target_psnr", "pixel_tolerance"})])
+def test_frame_stats_carry_only_the_active_criterions_knobs(ball_store, criterion, knobs, absent):
+    """A frame's stats name the criterion and hold its own settings (the steered bound included), none of
+    another criterion's (issue 26: a dead alpha was reported under the screen criterion)."""
+    rt = Runtime(ball_store, device="cpu", criterion=criterion, alpha=0.3)
+    stats = frames(rt, 1)[0].stats
+    assert stats["criterion"] == criterion
+    assert knobs <= set(stats) and not absent & set(stats)
+    assert stats["error_bound"] == rt.error_bound
+    if criterion == "thesis":
+        assert stats["alpha"] == 0.3

@@ -103,8 +103,7 @@ def _frames_summary(args, rt, store, rows) -> dict:
     ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
     tris = np.array([r["triangles"] for r in rows])
     summary = {"frames": len(rows), "path": args.path, "lod": not args.full, "criterion": rt.criterion.name,
-               "interpolation": rt.interpolation, "target_psnr": rt.target_psnr, "error_bound": rt.error_bound,
-               "alpha": rt.alpha,
+               "interpolation": rt.interpolation, **rt.criterion.settings(),  # the active criterion's knobs only
                "first_frame_ms": rows[0]["ms_total"],
                "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
                "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),

@@ -428,8 +428,8 @@ class Runtime:
             "refined": int(refined),
             "coarsened": int(coarsened),
             "passes": int(passes),
-            "error_bound": float(self.error_bound),
-            "alpha": float(self.alpha),
+            "criterion": self.criterion.name,
+            **self.criterion.settings(),  # the active criterion's knobs only (error_bound steered)
             "lights_clamped": int(self.lights_clamped),
             "shadow_rays": int(self.lighting.rays),  # M-3: rays cast toward the lights
             "estimated_psnr_db": self.estimated_psnr,  # E-3 (None without a target_psnr)
