@@ -24,7 +24,7 @@ BENCHMARKS = ["visibility", "bake", "table1", "light_spacing", "hierarchy", "env
               "bake_memory"]
 #: Arguments of the full runs the docs quote (not passed with --quick). gi.py --mitsuba needs Mitsuba 3
 #: (pip install '.[reference]'): the gi_mitsuba table quotes that part of gi.json.
-FULL_ARGS = {"view_cut": ["--frames", "48"], "gi": ["--mitsuba"]}
+FULL_ARGS = {"view_cut": ["--frames", "48"], "gi": ["--mitsuba"], "moving_lights": ["--mitsuba"]}
 
 
 def command(script: str, extra: list[str], quick: bool) -> list[str]:
