@@ -13,7 +13,8 @@ Controls (also printed by H):
     M light markers    - / =  exposure - / + 1/2 stop            H help     Q / Escape quit
 
 The overlay (top left) shows triangles, vertices, the active criterion with its knobs (the error bound; alpha only
-for "thesis", the only criterion that reads it), lights and the frame time (run-time update and draw); the sliders
+for "thesis", the only criterion that reads it; under a target PSNR the frame's estimated PSNR, E-3), lights and
+the frame time (run-time update and draw); the sliders
 (bottom left) show the same knobs and follow the keys. Without a display it
 raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
 """
@@ -368,6 +369,7 @@ class Viewer:
         self.renderer = Renderer(w.ctx)
         self.overlay = _Overlay(w.ctx)
         self.frame = None
+        self.pushed = None  # the (error_bound, alpha) last given to the source
         self.ms_update = self.ms_draw = 0.0
         w.mouse_drag_event_func = self._drag
         w.mouse_press_event_func = self._press
@@ -437,10 +439,13 @@ class Viewer:
         s = self.state
         if s.dirty or self.frame is None:
             t0 = time.perf_counter()
-            self.source.set_error_bound(s.error_bound, s.alpha)
+            if (s.error_bound, s.alpha) != self.pushed:  # the user moved a knob (not every frame: a target's
+                self.source.set_error_bound(s.error_bound, s.alpha)  # steering keeps the bound it found, E-4)
             self.source.set_lights(s.lights, s.colors)
             self.source.set_camera(s.camera)
             self.frame = self.source.update()
+            s.error_bound = float(getattr(self.source, "error_bound", s.error_bound))  # the steered bound shows
+            self.pushed = (s.error_bound, s.alpha)
             s.lights = np.asarray(self.frame.lights, np.float64).copy()  # as the run time clamped them
             self.ms_update = 1e3 * (time.perf_counter() - t0)
             s.dirty = False
@@ -452,7 +457,9 @@ class Viewer:
         st = self.frame.stats
         text = (f"{info['triangles']:,} triangles, {len(self.frame.positions):,} vertices, "
                 f"{'LOD' if getattr(self.source, 'lod', False) else 'full resolution'}\n"
-                f"{s.knobs()}  exposure {s.exposure:+.1f}\n"
+                f"{s.knobs()}  exposure {s.exposure:+.1f}"
+                + (f"  estimated {st['estimated_psnr_db']:.1f} dB" if st.get("estimated_psnr_db") is not None else "")
+                + "\n"
                 f"light {s.selected + 1} of {len(s.lights)} at ({', '.join(f'{x:.3f}' for x in s.lights[s.selected])})\n"
                 f"update {self.ms_update:.0f} ms (cut {st.get('ms_cut', 0.0):.0f}), draw {self.ms_draw:.0f} ms  [H help]")
         self.overlay.draw(text, w.buffer_size, s.sliders(), {"error_bound": s.error_bound, "alpha": s.alpha})
