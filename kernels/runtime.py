@@ -202,7 +202,7 @@ def view_errors(
     # S-1 (criterion 0): geometry in pixels at the exchange rate geo_rate, luminance weighted by pixel coverage
     geo_term = g * diag * geo_rate
     area = 3.141592653589793 * fp * fp
-    cover = wp.min(1.0, area)
+    cover = float(1.0)  # S-1: a node in view decides at least one pixel, however small its footprint
     if area > area_ref:  # S-1: a large node's squared error summed over its pixels, at most bound^2 area_ref
         cover = wp.sqrt(area / area_ref)
     e_geo[k] = g
@@ -280,3 +280,25 @@ def relight(
     radiance[k, 0] = r0  # T-7
     radiance[k, 1] = r1
     radiance[k, 2] = r2
+
+
+@wp.kernel
+def first_hits(
+    mesh: wp.uint64,  # In: BVH of the whole scene
+    eye: wp.vec3,  # In: camera position
+    corner: wp.vec3,  # In: direction (unnormalised) from the eye through the corner of grid cell (0, 0)
+    du: wp.vec3,  # In: direction step from one grid column to the next
+    dv: wp.vec3,  # In: direction step from one grid row to the next
+    columns: int,  # In: grid columns (rows = face.shape[0] / columns)
+    face: wp.array(dtype=wp.int32),  # Out: (rows * columns,) the first face the ray through each cell's centre
+    #                                       meets, -1 where it meets none
+):
+    """E-2 (docs/RUNTIME.md): one primary ray from the eye through the centre of each cell of a screen grid."""
+    k = wp.tid()
+    i = k % columns
+    j = k / columns
+    d = corner + (float(i) + 0.5) * du + (float(j) + 0.5) * dv
+    face[k] = -1
+    q = wp.mesh_query_ray(mesh, eye, wp.normalize(d), 1.0e30)
+    if q.result:
+        face[k] = q.face

@@ -24,7 +24,7 @@ def criterion_error(rt, culled, e_geo, e_lumi, footprint, e_detail) -> np.ndarra
     + (1 - alpha) e_lumi`` for "thesis"; for "screen" (S-1) ``max(E0 g_px / tau_px, e_detail cover)``: the
     geometric error in pixels at the exchange rate E0 / tau_px (E0 the default bound, or the steered bound under a
     target_psnr; tau_px the pixel tolerance: at the default bound a node refines when it moves anything by more
-    than tau_px) and the S-2 detail bound weighted by the share of a pixel the node's footprint covers, growing with
+    than tau_px) and the S-2 detail bound at full weight for a node covering up to A_ref pixels (at least one pixel however small), growing with
     sqrt(area / A_ref) above A_ref = AREA_SHARE W H (S-2: the completion residuals and edge steps under the node,
     not its spread: a smooth gradient spreads but interpolates well); one bound E then steers both."""
     crit = rt.criterion.settings()
@@ -38,7 +38,7 @@ def criterion_error(rt, culled, e_geo, e_lumi, footprint, e_detail) -> np.ndarra
         geo_term = g_px * max(e0, 1e-12) / crit["pixel_tolerance"]
         area = np.pi * footprint ** 2
         ref = AREA_SHARE * cam.width * cam.height
-        cover = np.where(area > ref, np.sqrt(area / ref), np.minimum(1.0, area))
+        cover = np.where(area > ref, np.sqrt(area / ref), 1.0)  # at least one pixel
         err = np.maximum(geo_term, e_detail * cover)
     else:
         raise LodprtError(f"criterion {rt.criterion.name!r}: the oracle has no reference for it")

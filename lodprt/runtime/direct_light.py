@@ -82,11 +82,10 @@ class DirectLight:
         self.uses_visibility = self.mode != kdirect.RAYS
 
     # -- per sample (M-2) ----------------------------------------------------------------------------------------
-    def split(self, sample: int, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(visibility (V,) uint8, residual (V, C, ncoef) float32) of light sample ``sample`` whose completed
-        coefficients are ``coeffs`` (V, C, ncoef): the bake's shadow rays and Phong SH (kernels.visibility,
-        kernels.shading), unreferenced vertices BACK_FACING with their coefficients as given. Without a
-        residual (``self.residual`` False: a direct-only store) the coefficients come back as given."""
+    def _at_sample(self, sample: int, with_direct: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """(visibility states (V,) uint8, and with ``with_direct`` D_j V_j (K, C, ncoef) float32 at the referenced
+        vertices, else None) of light sample ``sample``: the bake's shadow rays and Phong SH (kernels.visibility,
+        kernels.shading) in the store's channel layout, unreferenced vertices BACK_FACING."""
         from lodprt.kernels import shading as kshade
         from lodprt.kernels import visibility as kvis
 
@@ -98,8 +97,8 @@ class DirectLight:
                                                     self.offset], outputs=[vis], device=dev)
         states = np.full(self.num_vertices, int(kvis.BACK_FACING), np.uint8)
         states[self.referenced] = vis.numpy()
-        if not self.residual:
-            return states, np.asarray(coeffs, np.float32)
+        if not with_direct:
+            return states, None
         direct = wp.zeros((K, self.channels, self.ncoef), dtype=wp.float32, device=dev)
         order = self.store.sh_order
         wp.launch(kshade.phong_sh, dim=K, inputs=[self.points, self.normals, self.material_id, self.ref_ids, vis,
@@ -107,9 +106,30 @@ class DirectLight:
                                                   self.radius, wp.zeros((K, order * order), dtype=wp.float32,
                                                                         device=dev)],
                   outputs=[direct], device=dev)
+        return states, direct.numpy()
+
+    def split(self, sample: int, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(visibility (V,) uint8, residual (V, C, ncoef) float32) of light sample ``sample`` whose completed
+        coefficients are ``coeffs`` (V, C, ncoef): M-2's R_j = S_j - D_j V_j at the referenced vertices
+        (``_at_sample``), unreferenced vertices BACK_FACING with their coefficients as given. Without a
+        residual (``self.residual`` False: a direct-only store) the coefficients come back as given."""
+        states, direct = self._at_sample(sample, self.residual)
+        if not self.residual:
+            return states, np.asarray(coeffs, np.float32)
         residual = np.asarray(coeffs, np.float32).copy()
-        residual[self.referenced] -= direct.numpy()
+        residual[self.referenced] -= direct
         return states, residual
+
+    def drawn(self, sample: int, coeffs: np.ndarray) -> np.ndarray:
+        """The radiance field M-1 draws with the light on sample ``sample`` (V, C, ncoef) float32, whose
+        interpolation error the view cut bounds (``lodprt.runtime.node_bounds``): S_j itself on a GI store (M-1
+        gives back S_j on a sample), D_j V_j exact at every referenced vertex on a direct-only store (where the
+        light cut's completion ``coeffs`` is linear between the vertices it kept, and the drawn field is not)."""
+        if self.residual:
+            return np.asarray(coeffs, np.float32)
+        out = np.asarray(coeffs, np.float32).copy()
+        out[self.referenced] = self._at_sample(sample, True)[1]
+        return out
 
     # -- per frame (M-1) -----------------------------------------------------------------------------------------
     def add(self, vid, lights, colors, light_slots, light_weights, sample_vis, coeffs, *, eye=None, radiance=None,

@@ -50,15 +50,19 @@ def check_target(psnr) -> float | None:
 
 
 def covered_pixels(positions: np.ndarray, triangles: np.ndarray, vp: np.ndarray, eye, width: int,
-                   height: int) -> float:
+                   height: int, lit: np.ndarray | None = None) -> float:
     """E-2: the screen area in pixels of the triangles (indices into ``positions``) that face ``eye`` and lie in
-    front of it, projected by ``vp`` (projection @ view), summed and capped at the screen's."""
+    front of it, projected by ``vp`` (projection @ view), summed and capped at the screen's; with ``lit`` (per
+    position, bool) only the triangles with a lit vertex (a frame's error is measured over the pixels either frame
+    shows non-black, ``lodprt.display.error_figure.error_numbers``: an unlit region adds no pixel)."""
     if not len(triangles):
         return 0.0
     p = np.asarray(positions, np.float64)
     t = np.asarray(triangles, np.int64)
     a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
     front = (np.cross(b - a, c - a) * (np.asarray(eye, np.float64) - a)).sum(1) > 0
+    if lit is not None:
+        front &= np.asarray(lit, bool)[t].any(1)
     clip = np.c_[p, np.ones(len(p))] @ np.asarray(vp, np.float64).T
     w = clip[:, 3]
     ok = front & (w[t] > 1e-9).all(1)
@@ -143,8 +147,8 @@ class Steering:
         return new
 
 
-def estimate(rt, positions: np.ndarray, triangles: np.ndarray,
-             steering: Steering | None = None) -> tuple[float, float | None]:
+def estimate(rt, positions: np.ndarray, triangles: np.ndarray, steering: Steering | None = None,
+             lit: np.ndarray | None = None) -> tuple[float, float | None]:
     """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames from ``steering`` or None without
     one) from
     the cut's coarse nodes (culling, footprint and S-1 error from ``Runtime.node_errors(detail_only=True)``, E-1 from
@@ -154,12 +158,49 @@ def estimate(rt, positions: np.ndarray, triangles: np.ndarray,
     nodes = act[act >= rt.h.num_vertices]
     ne = rt.node_errors(nodes, exact=False, detail_only=True)
     ms = node_mean_square(rt, nodes)
-    area = np.minimum(projected_area(rt, nodes), float(cam.width * cam.height))
-    sse = np.where(ne.culled, 0.0, ms * area)
-    cov = covered_pixels(positions, triangles, rt.vp, cam.eye, cam.width, cam.height)
+    area = np.clip(projected_area(rt, nodes), 1.0, float(cam.width * cam.height))  # at least the pixel it decides
+    face, cell = screen_hits(rt)
+    seen = rt.faces[face[face >= 0]]  # (hits, 3) leaves of the faces the rays met first
+    hidden = np.ones(rt.h.num_nodes, bool)
+    hidden[rt.cut.anc[seen.ravel()]] = False
+    hidden = hidden[nodes] & (area >= 2.0 * cell)  # no ray met a node large enough to be met: hidden behind others
+    sse = np.where(ne.culled | hidden, 0.0, ms * area)
+    cov = cell * float(lit[seen].any(1).sum()) if lit is not None else \
+        covered_pixels(positions, triangles, rt.vp, cam.eye, cam.width, cam.height)
     est = psnr(float(sse.sum()), cov)
     new = None if steering is None else steering.next_bound(rt.error_bound, est, ne.error, sse, cov)
     return est, new
+
+
+#: E-2: one coverage ray per COVERAGE_STRIDE x COVERAGE_STRIDE pixels
+COVERAGE_STRIDE = 4
+
+
+def screen_hits(rt) -> tuple[np.ndarray, float]:
+    """E-2's rays: the first face of the store's full mesh (-1: none) that a primary ray through the centre of each
+    COVERAGE_STRIDE x COVERAGE_STRIDE cell of the screen meets (``kernels.runtime.first_hits``, the scene's
+    BVH), and the pixels one cell stands for."""
+    import warp as wp
+
+    from lodprt.kernels import runtime as kr
+
+    cam = rt.camera
+    cols, rows = max(1, -(-cam.width // COVERAGE_STRIDE)), max(1, -(-cam.height // COVERAGE_STRIDE))
+    inv = np.linalg.inv(np.asarray(rt.vp, np.float64))
+    eye = np.asarray(cam.eye, np.float64)
+
+    def ray(x, y):  # direction from the eye through the near plane at NDC (x, y)
+        q = inv @ np.array([x, y, -1.0, 1.0])
+        return q[:3] / q[3] - eye
+
+    corner = ray(-1.0, 1.0)
+    du, dv = (ray(1.0, 1.0) - corner) / cols, (ray(-1.0, -1.0) - corner) / rows
+    mesh = rt.scene_bvh()
+    face = wp.zeros(cols * rows, dtype=wp.int32, device=rt.device)
+    vec = lambda a: wp.vec3(*map(float, a))  # noqa: E731
+    wp.launch(kr.first_hits, dim=cols * rows, inputs=[mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
+              outputs=[face], device=rt.device)
+    return face.numpy(), cam.width * cam.height / (cols * rows)
 
 
 _SURFACE: dict = {}  # id(hierarchy) -> (weak reference to it, (N,) surface area under each node)

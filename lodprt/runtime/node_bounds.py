@@ -77,6 +77,19 @@ def detail_mean_square(h, c: np.ndarray, white: float, plan, levels: list) -> np
     return (s[V:] / leaves[:, None]).astype(np.float32)
 
 
+def subtree_deviation(h, levels: list) -> np.ndarray:
+    """S-3 for every node (N,) float64: a bound on how far the coarse surface around a node may lie from the
+    leaves under it, ``|e_k| + max(dev(c0), dev(c1))`` bottom-up (0 for leaves; e_k the error vector of the node's
+    own collapse, which measures one step only: the collapsed vertex against the surface of the step before),
+    capped at the node's bounding radius (no leaf lies farther than that from the node's vertex)."""
+    e = np.linalg.norm(np.asarray(h.error_vector, np.float64), axis=1)
+    dev = e.copy()
+    c0, c1 = h.children[:, 0], h.children[:, 1]
+    for nodes in levels:
+        dev[nodes] = e[nodes] + np.maximum(dev[c0[nodes]], dev[c1[nodes]])
+    return np.minimum(dev, np.asarray(h.radius, np.float64))
+
+
 def leaf_rings(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every original edge in both directions, sorted by its first vertex: (v, q, start of each v's run)."""
     f = faces

@@ -42,7 +42,10 @@ class Relighting:
         # T-15 per sample when the lights first use it (SPEC 5), float32 slots, vertex-major (V, slots, C, ncoef);
         # with a direct term the slots hold each sample's residual R_j (GI stores) and its visibility (M-2)
         split = d.split if d is not None and (d.residual or d.uses_visibility) else None
-        self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress, split=split)
+        # the view cut's per-node bounds bound the error of the field drawn at each sample (D_j V_j exact on a
+        # direct-only store, not the light cut's completion)
+        self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress, split=split,
+                                   drawn=None if d is None else d.drawn)
         self.channels, self.ncoef = self.samples.C, self.samples.n
         self.weights = None
         self.rays = 0  # shadow rays the last relight cast (M-3)

@@ -33,7 +33,7 @@ class SampleCache:
     content does (the device copies are refreshed from it).
     """
 
-    def __init__(self, store, *, cache_bytes: int | None = None, progress=None, split=None):
+    def __init__(self, store, *, cache_bytes: int | None = None, progress=None, split=None, drawn=None):
         self.store = store
         self.V = store.num_vertices
         self.C = int(store.root.attrs.get("channels", 1))
@@ -46,6 +46,9 @@ class SampleCache:
         # M-2: split(sample, completed) -> (visibility (V,) uint8, residual (V, C, ncoef)); the slots then hold the
         # residual and ``visibility`` (V, slots) the sample's visibility states (lodprt.runtime.direct_light)
         self.split = split
+        # drawn(sample, completed) -> the field the run time draws with the light on that sample, which the derived
+        # per-node bounds are made from (lodprt.runtime.direct_light.DirectLight.drawn); None: S_j itself
+        self.drawn = drawn
         self.visibility = np.zeros((self.V, 0), np.uint8)
         self.derived: dict[str, tuple[np.ndarray, typing.Callable]] = {}
         self.slot_sample = np.zeros(0, np.int64)
@@ -124,8 +127,10 @@ class SampleCache:
         c = self.store.complete(sample).astype(np.float32)  # T-15
         if self.slot_sample[slot] >= 0:
             log.debug("sample cache: slot %d: sample %d replaces %d", slot, sample, self.slot_sample[slot])
-        for arr, make in self.derived.values():  # per-node bounds from the sample's radiance, S_j
-            arr[:, slot] = make(c)
+        if self.derived:  # per-node bounds from the field drawn with the light on the sample (S_j by default)
+            f = c if self.drawn is None else self.drawn(sample, c)
+            for arr, make in self.derived.values():
+                arr[:, slot] = make(f)
         if self.split is not None:
             vis, c = self.split(sample, c)  # M-2
             self.visibility[:, slot] = vis
@@ -140,8 +145,10 @@ class SampleCache:
         if name not in self.derived:
             arr = np.zeros((rows, self.slots) + tuple(shape), dtype)
             for s in np.flatnonzero(self.slot_sample >= 0):  # from S_j: completed afresh when slots hold R_j
-                c = self.coeffs[:, s] if self.split is None else self.store.complete(int(self.slot_sample[s]))
-                arr[:, s] = make(c.astype(np.float32))
+                k = int(self.slot_sample[s])
+                c = self.coeffs[:, s] if self.split is None else self.store.complete(k)
+                c = c.astype(np.float32) if self.drawn is None else self.drawn(k, c.astype(np.float32))
+                arr[:, s] = make(c)
             self.derived[name] = (arr, make)
             self.version += 1
         return self.derived[name][0]

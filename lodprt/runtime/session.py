@@ -129,14 +129,19 @@ class Runtime:
         self.white = float(white) if white is not None else default_white(store)
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
-        self._levels = None  # internal nodes by height, for the per-node bounds
         self._synced = -1  # the sample cache's version the device arrays hold
         # per-node geometry for the error terms
         self.node_pos = self.positions[h.vertex]
         internal = h.children[:, 1] >= 0
         self.node_collapsed = np.where(internal[:, None], self.positions[h.vertex[np.maximum(h.children[:, 1], 0)]],
                                        self.node_pos)
-        self.error_vector = h.error_vector.astype(np.float64)
+        # S-3: the error vector's direction at the subtree's accumulated deviation (one collapse's vector measures
+        # one step; a coarse node stands for all the steps under it)
+        self._levels = node_bounds.height_levels(h)
+        own = h.error_vector.astype(np.float64)
+        length = np.linalg.norm(own, axis=1)
+        unit = np.where(length[:, None] > 0, own / np.maximum(length, 1e-300)[:, None], h.cone_axis)
+        self.error_vector = unit * node_bounds.subtree_deviation(h, self._levels)[:, None]
         self.axis = h.cone_axis.astype(np.float64)
         self.half = h.cone_half_angle.astype(np.float64)
         self.radius = h.radius.astype(np.float64)
@@ -180,8 +185,6 @@ class Runtime:
         h, cache = self.h, self.samples
         key = "detail" if name == "detail" else "boxes"
         if key not in cache.derived:
-            if self._levels is None:
-                self._levels = node_bounds.height_levels(h)
             rows, levels, white = h.num_nodes - h.num_vertices, self._levels, self.white
             if key == "detail":
                 plan, rings = self.store.completion_plan(), node_bounds.leaf_rings(self.faces)
@@ -387,9 +390,30 @@ class Runtime:
         """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr, E-4: the bound for the next
         frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the cached errors
         stay: a node cached under the old bound is evaluated again when due)."""
-        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri, self.steering)
+        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri, self.steering,
+                                                        lit=self.lit_vertices())
         if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
+
+    def lit_vertices(self) -> np.ndarray:
+        """(V,) bool: whether each vertex has any radiance at one of the samples in use (the field drawn at each,
+        ``SampleCache.drawn``), for E-2's count of the pixels a frame shows non-black."""
+        cache = self.samples
+        if "lit" not in cache.derived:
+            cache.derive("lit", lambda c: (c.reshape(len(c), -1) != 0).any(1), self.h.num_vertices, (), bool)
+        return cache.derived["lit"][0][:, self.used_slots].any(1)
+
+    def scene_bvh(self):
+        """Warp mesh (BVH) of the store's triangles on the Runtime's device, face ids as in ``faces``: the direct
+        light's when it has one, else built once (E-2's rays)."""
+        d = self.lighting.direct
+        if d is not None:
+            return d.mesh
+        if "bvh" not in self._d:
+            wp = self._wp
+            idx = wp.array(np.ascontiguousarray(self.faces, np.int32).ravel(), dtype=wp.int32, device=self.device)
+            self._d["bvh"] = wp.Mesh(points=self._d["positions"], indices=idx)
+        return self._d["bvh"]
 
     def update(self, *, max_passes: int | None = None) -> Frame:
         """Move the cut for the current camera and lights, triangulate it, relight it: a ``Frame``."""
