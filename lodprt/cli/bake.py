@@ -20,6 +20,7 @@ examples:
   lodprt bake scene.toml -o bunny.zarr --resume          (after a killed bake)
   lodprt bake finer.toml -o bunny.zarr --add-samples     (finer.toml: the same scene, a finer light grid)
   lodprt -v bake scene.toml -o bunny.zarr --workers 4    (dask; -v prints the dashboard link)
+  lodprt bake big.toml -o big.zarr --workers 8 --vertex-range 1000000   (a sample as tasks of 1M vertices)
 SCENE is 'demo' (the embedded default), a TOML scene file (docs/SCENE.md) or a mesh path."""
 
 
@@ -59,6 +60,10 @@ def register(sub) -> None:
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="bake the light samples on the running dask cluster at ADDRESS (tcp://host:port); every "
                    "worker must see OUT's folder at the same path")
+    b.add_argument("--vertex-range", type=int, default=None, metavar="N",
+                   help="with --workers or --scheduler: split a light sample of more than N baked vertices into "
+                   "ceil(vertices/N) dask tasks of contiguous vertex ranges on different workers, joined into the "
+                   "same store (default: off, a sample is one task; not with --bounces; docs/DISTRIBUTED.md)")
     gi = b.add_argument_group("interreflection (docs/GI.md)")
     gi.add_argument("--bounces", type=int, default=0, metavar="B",
                     help="diffuse interreflection passes after the direct light (default 0: direct light only)")
@@ -88,6 +93,7 @@ def cmd_bake(args) -> int:
 
     cli_args.at_least("--jobs", args.jobs, 1)
     cli_args.at_least("--workers", args.workers, 1)
+    cli_args.at_least("--vertex-range", args.vertex_range, 1)
     if args.workers is not None and args.scheduler is not None:
         raise LodprtError("--workers and --scheduler: give one (a local cluster, or the address of a running one)")
     from lodprt.store.codecs import parse_codec
@@ -121,6 +127,7 @@ def cmd_bake(args) -> int:
             add_samples=args.add_samples,
             workers=args.workers,
             scheduler=args.scheduler,
+            vertex_range=args.vertex_range,
             bounces=args.bounces,
             bounce_threshold=args.bounce_threshold,
             gi_rays=args.gi_rays,
@@ -133,9 +140,10 @@ def cmd_bake(args) -> int:
 
 def _bake_environment(args) -> int:
     """``bake SCENE --environment ENV``: distant-light transfer, as bake-environment with its defaults."""
-    if args.resume or args.add_samples or args.workers is not None or args.scheduler is not None:
-        raise LodprtError("--resume, --add-samples, --workers and --scheduler are point-light bake options; an "
-                          "environment bake runs in one process and starts afresh")
+    if (args.resume or args.add_samples or args.workers is not None or args.scheduler is not None
+            or args.vertex_range is not None):
+        raise LodprtError("--resume, --add-samples, --workers, --scheduler and --vertex-range are point-light bake "
+                          "options; an environment bake runs in one process and starts afresh")
     if args.bounces:
         raise LodprtError("--bounces is a point-light option; an environment bake takes its passes from "
                           "bake-environment --bounces")

@@ -124,8 +124,13 @@ class SampleJob:
         return info
 
     def run(self, k: int) -> tuple[dict, float]:
-        """Bake and write sample ``k`` in a worker process: (its statistics, seconds spent loading kernels now).
-        The device state is made at the first task of this job in the process and kept for the next ones."""
+        """Bake and write sample ``k`` in a worker process: (its statistics, seconds spent loading kernels now)."""
+        baker, lightcut, load = self.worker_state()
+        return self.write(*self.compute(baker, lightcut, k)), load
+
+    def worker_state(self):
+        """(Baker, LightCut or None, seconds spent loading kernels now) of this job in this worker process: made at
+        the job's first task in the process and kept for the next ones (whole samples and vertex ranges alike)."""
         if _version() != self.version:
             raise LodprtError(f"a dask worker runs lodprt {_version()}, the client {self.version}: install the same "
                               "lodprt everywhere (the store records one version)")
@@ -136,10 +141,10 @@ class SampleJob:
                 load = load_kernels(self.device, *bake_kernels())
                 _WORKER.update(token=self.token, state=self.device_state())
             baker, lightcut = _WORKER["state"]
-        return self.write(*self.compute(baker, lightcut, k)), load
+        return baker, lightcut, load
 
 
-_WORKER: dict = {}  # SampleJob.run's device state in this process
+_WORKER: dict = {}  # SampleJob.worker_state's device state in this process
 _WORKER_LOCK = threading.Lock()
 
 
@@ -178,7 +183,7 @@ def bake(
     add_samples: bool = False,
     workers: int | None = None,
     scheduler: str | None = None, compress: str = "none",
-    hierarchy_method: str = "rounds",
+    hierarchy_method: str = "rounds", vertex_range: int | None = None,
 ) -> BakeResult:
     """Bake light samples of ``scene`` and write the store at ``out``.
 
@@ -196,7 +201,8 @@ def bake(
     ``resume`` continues the killed bake of ``out`` (or finds it finished); ``add_samples`` extends the store at
     ``out`` to the scene's light grid; ``workers`` (a local dask cluster of that many processes) or ``scheduler``
     (the address of one) bakes the samples on dask.distributed, ``jobs`` threads per local worker
-    (docs/DISTRIBUTED.md). The store is the same, array for array, whichever way it was made.
+    (docs/DISTRIBUTED.md; ``vertex_range`` N splits a sample of over N baked vertices into vertex-range tasks).
+    The store is the same, array for array, whichever way it was made.
     """
     from lodprt.precompute.gi import GISettings, gi_attributes
 
@@ -206,13 +212,12 @@ def bake(
     check_hierarchy(hierarchy, threshold_deg, hierarchy_method)
     check_sh_order(sh_order)
     codec = bake_codec(compress, *layout(scene, sh_order), out)
-    cluster = workers is not None or scheduler is not None
+    from lodprt.precompute.distributed import check_cluster  # dask itself is imported only for a cluster
+
+    cluster = check_cluster(workers=workers, scheduler=scheduler, threads=jobs, vertex_range=vertex_range,
+                            bounces=gi.bounces)
     if (cluster or resume or add_samples) and out is None:
         raise LodprtError("workers, scheduler, resume and add_samples need a store to write (out)")
-    if cluster:
-        from lodprt.precompute.distributed import check_options
-
-        check_options(workers=workers, scheduler=scheduler, threads=jobs)
     target = None
     if out is not None:
         from lodprt.store.resume import BakeTarget
@@ -245,7 +250,7 @@ def bake(
             from lodprt.precompute.distributed import run_on_cluster
 
             infos, load_seconds = run_on_cluster(job, todo, workers=workers, scheduler=scheduler, threads=jobs,
-                                                 progress=step)
+                                                 progress=step, vertex_range=vertex_range)
         else:
             baker, lightcut = job.device_state()
             infos = _run_samples(job, baker, lightcut, todo, jobs, step)

@@ -1,8 +1,9 @@
 """One light sample's work on a Warp device (SPEC 4; thesis 2.2; T-8..T-10): ``Baker`` holds the scene's BVH and
 material tables, casts the shadow rays (visibility), shades Phong radiance and projects it on SH over the view
 direction (T-6, closed-form specular lobe P-6), for every referenced vertex or only on a light cut
-(:mod:`lodprt.precompute.light_cut`); ``bake_kernels`` names the kernels ``lodprt.devices.load_kernels`` compiles or loads once. ``lodprt.precompute.bake``
-plans the bake and writes the store.
+(:mod:`lodprt.precompute.light_cut`), or for a range of them (``lodprt.precompute.vertex_ranges``);
+``bake_kernels`` names the kernels ``lodprt.devices.load_kernels`` compiles or loads once.
+``lodprt.precompute.bake`` plans the bake and writes the store.
 """
 
 from __future__ import annotations
@@ -148,8 +149,42 @@ class Baker:
         """
         if self.gi is not None:
             return self.gi.sample_cut(light, lightcut, threshold_deg)  # interreflection (docs/GI.md)
-        wp = self.wp
         vis = self.visibility(light).numpy().copy()
+        ids, nodes, dark, states = self.light_cut(light, lightcut, threshold_deg, vis)
+        return ids, nodes, dark, self.shade_rows(light, ids, states), vis
+
+    def visibility_rows(self, light: np.ndarray, start: int, stop: int) -> np.ndarray:
+        """Visibility states (stop - start,) uint8 of the baked vertices ``ids[start:stop]`` alone, one shadow ray
+        each (T-8; the rows ``start:stop`` of :meth:`visibility`; a vertex-range task of a distributed bake)."""
+        from lodprt.kernels import visibility as kvis
+
+        wp = self.wp
+        ids = self.ids_host[start:stop]
+        visible = wp.zeros(len(ids), dtype=wp.uint8, device=self.device)
+        wp.launch(
+            kvis.shadow_rays,
+            dim=len(ids),
+            inputs=[self.mesh.id, self.points, self.normals, wp.array(ids, dtype=wp.int32, device=self.device),
+                    wp.vec3(*map(float, light)), float(self.offset)],
+            outputs=[visible],
+            device=self.device,
+        )
+        return visible.numpy().copy()
+
+    def sample_rows(self, light: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rows ``start:stop`` of :meth:`sample` (no interreflection), computed for those vertices alone:
+        (coefficients (stop - start, C, ncoef) float32, visibility (stop - start,) uint8)."""
+        if self.gi is not None:
+            raise LodprtError("a vertex range of a sample has no interreflection passes (they gather over every "
+                              "vertex)")
+        visible = self.visibility_rows(light, start, stop)
+        return self.shade_rows(light, self.ids_host[start:stop], visible), visible
+
+    def light_cut(self, light: np.ndarray, lightcut, threshold_deg: float, vis: np.ndarray):
+        """The light cut of one sample from the visibility ``vis`` (R,) of every baked vertex: (vertex ids (K,)
+        int32 of the cut, ascending; the cut node of each (K,) int32; its dark flag (K,) uint8; the visibility
+        state of each kept vertex (K,) uint8)."""
+        wp = self.wp
         V = self.points.shape[0]
         full = np.full(V, BACK_FACING, np.uint8)  # vertices no face uses: dark, never kept
         full[self.ids_host] = vis
@@ -160,17 +195,23 @@ class Baker:
         order = np.argsort(verts[keep])
         nodes = nodes[keep][order].astype(np.int32)
         ids = verts[keep][order].astype(np.int32)
+        return ids, nodes, dark[nodes].astype(np.uint8), full[ids]
+
+    def shade_rows(self, light: np.ndarray, ids: np.ndarray, states: np.ndarray) -> np.ndarray:
+        """Phong SH coefficients (T-9, T-10) (K, C, ncoef) float32 of the vertices ``ids`` (K,) with visibility
+        ``states`` (K,)."""
+        wp = self.wp
         k = len(ids)
         basis = wp.zeros((k, self.sh_order * self.sh_order), dtype=wp.float32, device=self.device)
         coeffs = wp.zeros((k, self.channels, self.ncoef), dtype=wp.float32, device=self.device)
         self.shade(
             light,
-            wp.array(ids, dtype=wp.int32, device=self.device),
-            wp.array(full[ids], dtype=wp.uint8, device=self.device),
+            wp.array(np.ascontiguousarray(ids, np.int32), dtype=wp.int32, device=self.device),
+            wp.array(np.ascontiguousarray(states, np.uint8), dtype=wp.uint8, device=self.device),
             basis,
             coeffs,
         )
-        return ids, nodes, dark[nodes].astype(np.uint8), coeffs.numpy().copy(), vis
+        return coeffs.numpy().copy()
 
 
 def bake_kernels() -> tuple:

@@ -10,19 +10,19 @@ store, complete with its mark (``lodprt.store.sample_groups``). Only the sample'
 back to the client, whose progress bar follows the finished tasks. A worker killed mid-task loses nothing: the
 scheduler runs the task again elsewhere, and the group it was assembling never reached ``samples/``.
 
-Every worker must see the store's folder at the client's path (one machine, or a shared file system). Vertex
-ranges of one sample as separate tasks are left out: a sample is baked whole by one worker (docs/DISTRIBUTED.md).
+Every worker must see the store's folder at the client's path (one machine, or a shared file system). With
+``vertex_range`` N, a sample of more than N baked vertices is split into tasks of vertex ranges on different workers
+and one task that joins them and writes the group (:mod:`lodprt.precompute.vertex_ranges`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-import socket
-from pathlib import Path
 from typing import Callable
 
 from lodprt.errors import LodprtError
+from lodprt.precompute.vertex_ranges import check_store_visible, check_vertex_range, row_ranges, submit_ranges
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +37,20 @@ def dask_distributed():
     except ImportError as exc:
         raise LodprtError(f"--workers / --scheduler bake on dask.distributed, which is not installed: {INSTALL}") from exc
     return distributed
+
+
+def check_cluster(*, workers: int | None, scheduler: str | None, threads: int | None, vertex_range: int | None = None,
+                  bounces: int = 0) -> bool:
+    """Whether the bake runs on a cluster (``workers`` or ``scheduler``), refusing wrong options before any work;
+    ``vertex_range`` needs a cluster and no interreflection (``bounces`` 0). Imports dask only for a cluster."""
+    check_vertex_range(vertex_range, bounces=bounces)
+    if workers is None and scheduler is None:
+        if vertex_range is not None:
+            raise LodprtError(f"--vertex-range / vertex_range {vertex_range}: splits light samples into dask tasks; "
+                              "give --workers N or --scheduler ADDRESS too")
+        return False
+    check_options(workers=workers, scheduler=scheduler, threads=threads)
+    return True
 
 
 def check_options(*, workers: int | None, scheduler: str | None, threads: int | None):
@@ -96,22 +110,20 @@ def dashboard_note(client) -> str:
 
 def _sample_task(job, k: int) -> tuple[int, dict, float]:
     """A dask task: bake and write light sample ``k`` of ``job`` on this worker."""
-    if not Path(job.partial).is_dir():
-        raise LodprtError(f"{job.partial}: the store being written is not visible on worker host "
-                          f"{socket.gethostname()}; a distributed bake needs the client's folder on every worker "
-                          "(one machine or a shared file system)")
+    check_store_visible(job)
     info, load_seconds = job.run(k)
     return k, info, load_seconds
 
 
 def run_on_cluster(job, todo: list[int], *, workers: int | None = None, scheduler: str | None = None,
-                   threads: int | None = None, progress: Callable[[int, int], None] | None = None
-                   ) -> tuple[dict[int, dict], float]:
+                   threads: int | None = None, progress: Callable[[int, int], None] | None = None,
+                   vertex_range: int | None = None) -> tuple[dict[int, dict], float]:
     """Bake the light samples ``todo`` of ``job`` (a ``SampleJob`` with a partial store) on a dask cluster.
 
     Returns the statistics of each sample (by index) and the longest kernel loading of a worker.
     ``progress(done, len(todo))`` follows the finished tasks. A lost cluster raises a ``LodprtError`` marked
     ``resumable``: the samples finished so far stay in the partial store for ``bake --resume``.
+    ``vertex_range`` N: a sample of more than N baked vertices is split into vertex-range tasks (module doc).
     """
     distributed = dask_distributed()
     if job.partial is None:
@@ -121,7 +133,14 @@ def run_on_cluster(job, todo: list[int], *, workers: int | None = None, schedule
         if not todo:
             return {}, 0.0
         shared = client.scatter(job, broadcast=True, hash=False)  # once per worker, not once per task
-        futures = [client.submit(_sample_task, shared, k, key=f"lodprt-sample-{job.token}-{k:05d}") for k in todo]
+        rows = int(job.scene.referenced.sum())  # the baked vertices of every sample
+        if vertex_range is not None and rows > vertex_range:
+            log.info("light samples of %d baked vertices: %d vertex-range tasks of at most %d each", rows,
+                     len(row_ranges(rows, vertex_range)), vertex_range)
+            futures = [submit_ranges(client, shared, job, k, vertex_range, rows) for k in todo]
+        else:
+            futures = [client.submit(_sample_task, shared, k, key=f"lodprt-sample-{job.token}-{k:05d}")
+                       for k in todo]
         infos: dict[int, dict] = {}
         load = 0.0
         try:
