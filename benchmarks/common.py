@@ -42,6 +42,21 @@ def thesis_scene(*, quick: bool, sh_order: int | None = None):
                           "lights", f"stanford-bunny + {res}x{res} floor")
 
 
+def meshopt_halving(positions, faces) -> float:
+    """Seconds meshoptimizer's ``simplify`` (PyPI ``meshoptimizer``, the ``bench`` extra) takes to halve the mesh
+    (target half the indices, error bound 1: the face count decides), the yardstick of the hierarchy build."""
+    import time
+
+    import meshoptimizer
+
+    idx = np.ascontiguousarray(np.asarray(faces, np.uint32).ravel())
+    pos = np.ascontiguousarray(np.asarray(positions, np.float32))
+    out = np.empty_like(idx)
+    t = time.perf_counter()
+    meshoptimizer.simplify(out, idx, pos, target_index_count=len(idx) // 2, target_error=1.0)
+    return time.perf_counter() - t
+
+
 def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
     """Rows as a fixed-width text table; columns are (key, header, format)."""
     head = "  ".join(f"{h:>{max(len(h), 12)}}" for _, h, _ in columns)

@@ -8,7 +8,9 @@ measurement runs in a fresh child process; its peak resident memory is the kerne
 
 * ``pymeshlab``: one QEM halving of the scene (``meshing_decimation_quadric_edge_collapse`` to half the faces,
   ``optimalplacement=False``), the baseline the issue sets for the hierarchy build (at most 2x);
-* ``hierarchy``: ``build_hierarchy`` of the same scene; bytes per vertex = (peak - resident size just before the
+* ``meshoptimizer``: meshoptimizer's ``simplify`` halving the scene (the best of three after a first call), the
+  yardstick of issue 25 (the hierarchy build within 10x of it; ``x meshopt``);
+* ``hierarchy``: ``build_hierarchy`` of the same scene (Warp and its round kernels loaded first); bytes per vertex = (peak - resident size just before the
   build) / vertices;
 * ``bake``: the whole ``lodprt bake SCENE.toml -o OUT.zarr`` command (scene loading, hierarchy, light cut at the
   default 5 degrees, SH order 4, store writing), 3 x 3 x 3 = 27 light samples for the vertex sweep and 3 x 1 x 3 ..
@@ -35,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import environment, model, parser, plot_path, table, write
+from common import environment, meshopt_halving, model, parser, plot_path, table, write
 
 BUNNY = model("stanford-bunny")
 
@@ -75,8 +77,15 @@ def child(kind: str, floor: int) -> dict:
                                                     preservetopology=True)
         return {"seconds": time.perf_counter() - t, "rss_before": before, "vertices": scene.num_vertices,
                 "peak": _status("VmHWM")}
+    if kind == "meshoptimizer":
+        meshopt_halving(scene.positions, scene.faces)
+        return {"seconds": min(meshopt_halving(scene.positions, scene.faces) for _ in range(3)),
+                "rss_before": before, "vertices": scene.num_vertices, "peak": _status("VmHWM")}
+    from lodprt.devices import load_kernels
+    from lodprt.kernels import hierarchy as kernels
     from lodprt.model.hierarchy_build import build_hierarchy
 
+    load_kernels("cpu", kernels)
     t = time.perf_counter()
     h = build_hierarchy(scene.positions, scene.faces, scene.normals)
     return {"seconds": time.perf_counter() - t, "rss_before": before, "vertices": scene.num_vertices,
@@ -178,12 +187,14 @@ def vertex_sweep(floors, device, budget, t0, tmp) -> list[dict]:
             print(f"budget of {budget:.0f} s spent: stopping before floor {floor}", flush=True)
             break
         pm = measure_build("pymeshlab", floor)
+        mo = measure_build("meshoptimizer", floor)
         h = measure_build("hierarchy", floor)
         b = measure_bake(floor, [3, 3, 3], device, tmp)
         rt = measure_runtime(tmp / "out.zarr", device)
         V = h["vertices"]
         rows.append({"floor": floor, "vertices": V, "hierarchy_s": h["seconds"], "pymeshlab_s": pm["seconds"],
-                     "ratio": h["seconds"] / pm["seconds"], "hierarchy_peak_mib": h["peak"] / 2**20,
+                     "ratio": h["seconds"] / pm["seconds"], "meshopt_s": mo["seconds"],
+                     "x_meshopt": h["seconds"] / mo["seconds"], "hierarchy_peak_mib": h["peak"] / 2**20,
                      "hierarchy_b_per_v": h["bytes_per_vertex"], "pymeshlab_b_per_v": pm["bytes_per_vertex"],
                      "roots": h["roots"], "depth": h["depth"], "rounds": h["rounds"],
                      "stored_b_per_v": h["hierarchy_bytes"] / V, "bake_s": b["seconds"],
@@ -192,7 +203,8 @@ def vertex_sweep(floors, device, budget, t0, tmp) -> list[dict]:
                      "first_frame_s": rt["first_frame_s"], "runtime_mib": rt["above_start"] / 2**20,
                      "runtime_completed": rt["completed"]})
         r = rows[-1]
-        print(f"floor {floor}: {V:,} vertices, hierarchy {r['hierarchy_s']:.1f} s ({r['ratio']:.2f}x pymeshlab), "
+        print(f"floor {floor}: {V:,} vertices, hierarchy {r['hierarchy_s']:.1f} s ({r['ratio']:.2f}x pymeshlab, "
+              f"{r['x_meshopt']:.1f}x meshoptimizer), "
               f"{r['hierarchy_b_per_v']:.0f} B/vertex; bake {r['bake_s']:.1f} s, peak {r['bake_peak_mib']:.0f} MiB",
               flush=True)
     return rows
@@ -234,8 +246,10 @@ def plot(name, vrows, srows, fits):
 
     fig, ax = plt.subplots(1, 3, figsize=(13, 4))
     V = [r["vertices"] for r in vrows]
-    for key, label in (("hierarchy_s", "hierarchy"), ("pymeshlab_s", "one pymeshlab halving"), ("bake_s", "bake (27)")):
-        ax[0].loglog(V, [r[key] for r in vrows], "o-", label=f"{label}  ~V^{fits[key]:.2f}")
+    for key, label in (("hierarchy_s", "hierarchy"), ("pymeshlab_s", "one pymeshlab halving"), ("bake_s", "bake (27)"),
+                       ("meshopt_s", "one meshoptimizer halving")):
+        if all(key in r for r in vrows):
+            ax[0].loglog(V, [r[key] for r in vrows], "o-", label=f"{label}  ~V^{fits[key]:.2f}")
     ax[0].set(xlabel="vertices", ylabel="seconds", title="time")
     for key, fit, label in (("hierarchy_b_per_v", "hierarchy_bytes", "hierarchy build, over start"),
                             ("bake_b_per_v", "bake_bytes", "whole bake, peak")):
@@ -275,7 +289,7 @@ def main():
         srows = sample_sweep(sfloor, grids, device, Path(d))
         wrows = worker_sweep(sfloor, [3, 3, 3] if not args.quick else [2, 1, 1], device, Path(d))
     V = [r["vertices"] for r in vrows]
-    fits = {k: exponent(V, [r[k] for r in vrows]) for k in ("hierarchy_s", "pymeshlab_s", "bake_s")}
+    fits = {k: exponent(V, [r[k] for r in vrows]) for k in ("hierarchy_s", "pymeshlab_s", "bake_s", "meshopt_s")}
     fits["hierarchy_bytes"] = exponent(V, [r["hierarchy_b_per_v"] * r["vertices"] for r in vrows])  # above the start
     fits["bake_bytes"] = exponent(V, [r["bake_b_per_v"] * r["vertices"] for r in vrows])  # whole peak
     fits["samples_bake_s"] = exponent([r["samples"] for r in srows], [r["bake_s"] for r in srows])
@@ -283,6 +297,7 @@ def main():
     fits["samples_runtime_bytes"] = exponent([r["samples"] for r in srows], [r["runtime_mib"] for r in srows])
     print(table(vrows, [("floor", "floor", "d"), ("vertices", "vertices", ","), ("hierarchy_s", "hierarchy s", ".1f"),
                         ("pymeshlab_s", "halving s", ".1f"), ("ratio", "x halving", ".2f"),
+                        ("meshopt_s", "meshopt s", ".3f"), ("x_meshopt", "x meshopt", ".1f"),
                         ("hierarchy_b_per_v", "build B/v", ".0f"), ("pymeshlab_b_per_v", "halving B/v", ".0f"),
                         ("bake_s", "bake s", ".1f"), ("bake_peak_mib", "bake peak MiB", ".0f"),
                         ("bake_b_per_v", "bake B/v", ".0f"), ("open_s", "open s", ".1f"),

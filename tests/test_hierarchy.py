@@ -469,8 +469,8 @@ def test_every_round_is_pairwise_non_conflicting(monkeypatch):
     rounds = []
     select = CollapseRounds.select
 
-    def recording(self, src, dst, count, start, keys):
-        v, u = select(self, src, dst, count, start, keys)
+    def recording(self, dst, count, start):
+        v, u = select(self, dst, count, start)
         rounds.append((v, u, start.copy(), dst.copy()))
         return v, u
 

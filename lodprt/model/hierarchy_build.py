@@ -21,7 +21,7 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, concat_ranges, leaf_layout
-from lodprt.model.hierarchy_attributes import error_vectors, merge_cones
+from lodprt.model.hierarchy_attributes import merge_cones
 from lodprt.model.hierarchy_levels import mesh_groups
 from lodprt.model.hierarchy_rounds import QUADRIC_ENTRIES, CollapseRounds
 
@@ -154,9 +154,9 @@ class _Nodes:
         self.nb_chunks: list[np.ndarray] = []
         self.depth = 0
 
-    def add(self, st: CollapseRounds, cur: dict, v, u, nb_count, nb, tris, tri_count) -> None:
+    def add(self, st: CollapseRounds, cur: dict, v, u, nb_count, nb, error) -> None:
         """Record the round's collapses ``v -> u`` (local ids, made in this order): nodes, cones and radii
-        (figure 7, merged from the float64 cones standing at u and v), error vectors (figure 10)."""
+        (figure 7, merged from the float64 cones standing at u and v), error vectors ``error`` (figure 10)."""
         k = self.count + np.arange(len(v))
         cu, cv = st.node[u], st.node[v]
         self.parent[cu] = k
@@ -173,7 +173,7 @@ class _Nodes:
         self.axis[k] = axis
         self.half[k] = np.minimum(half + CONE_SLACK, math.pi)
         self.radius[k] = radius * (1 + 1e-6)  # float32 rounding must not cut a leaf off
-        self.error[k] = error_vectors(st.pos, v, tri_count, tris)
+        self.error[k] = error
         self.nb_count[k] = nb_count
         self.nb_chunks.append(st.gid[nb])
         self.depth = max(self.depth, int(height.max(initial=0)))
@@ -228,20 +228,22 @@ def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, t
             if _next_phase(st, phases):
                 continue
             break
-        if st.n > 64 and (st.n - np.count_nonzero(np.bincount(st.faces.ravel(), minlength=st.n))) * 2 > size:
-            cur = st.compact(cur)
+        dst, count, start = st.adjacency()
+        if st.n > 64 and np.count_nonzero(st.corners[0][1:] == st.corners[0][:-1]) * 2 > size:
+            cur = st.compact(cur)  # half of the vertices have gone: the rounds cost what the live mesh costs
             size = st.n
-        src, dst, count, start, keys = st.adjacency()
-        v, u = st.select(src, dst, count, start, keys)
+            dst, count, start = st.adjacency()
+        v, u = st.select(dst, count, start)
         if not len(v):
             if _next_phase(st, phases):
                 continue
             break
         nb_count = start[v + 1] - start[v]
         nb = dst[concat_ranges(start[v], start[v + 1])]  # v's neighbours before the collapse, sorted
-        del src, dst, count, start, keys
-        tris, tri_count = st.apply(v, u)
-        nodes.add(st, cur, v, u, nb_count, nb, tris, tri_count)
+        del dst, count, start
+        error = st.errors(v, u)
+        st.apply(v, u)
+        nodes.add(st, cur, v, u, nb_count, nb, error)
         rounds += 1
         # the tail: a whole round over the live mesh for next to nothing
         if len(v) < MIN_ROUND * movable and not _next_phase(st, phases):
