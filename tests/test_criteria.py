@@ -79,7 +79,7 @@ def test_criteria_differ_and_defaults_hold(ball_store):
     thesis.set_error_bound(0.2, alpha=0.5)
     assert thesis.criterion == ThesisCriterion(0.2, alpha=0.5)
     screen.set_error_bound(0.4, alpha=0.5)  # alpha checked, unread by the screen criterion
-    assert screen.criterion == ScreenCriterion(0.4)
+    assert screen.criterion == ScreenCriterion(0.4, target_psnr=36.0)  # the default target steers on from 0.4
 
 
 def ball_store_derived(rt) -> set:

@@ -113,7 +113,7 @@ def add_view_cut(p: argparse.ArgumentParser) -> None:
         own = "" if default is None or len(same) > 1 else f" (default {default:g})"
         what = "view cut error bound (default " if name == "error_bound" else ""
         text = what + "; ".join(k.help for k in same) + (")" if what else "") + own
-        p.add_argument("--" + name.replace("_", "-"), type=float, default=default, metavar=same[0].metavar,
+        p.add_argument("--" + name.replace("_", "-"), type=same[0].parse, default=default, metavar=same[0].metavar,
                        help=text)
     add_interpolation(p)
     add_outside(p)

@@ -33,6 +33,7 @@ class Knob(typing.NamedTuple):
     default: float | None
     help: str
     metavar: str
+    parse: typing.Callable = float  # the CLI's type
 
 
 def check_bound(error_bound) -> float:
@@ -105,6 +106,17 @@ PIXEL_TOLERANCE = 1.0
 #: grows with sqrt(area / (AREA_SHARE W H)), so its squared error summed over its pixels stays under
 #: bound^2 AREA_SHARE W H (S-1): it adds at most bound^2 AREA_SHARE to the frame's mean squared error
 AREA_SHARE = 1.0 / 32768
+#: "screen": the frame's error target when neither a bound nor a triangle budget is given (E-1..E-4): the stated
+#: 35 dB against the full mesh and 1 dB for the estimate's error (at most 0.4 dB optimistic on the scenes of
+#: benchmarks/view_cut.py)
+DEFAULT_TARGET_PSNR = 36.0
+#: "screen": the default bound (units of white): fixed with the target off, the steering's start with it on
+SCREEN_BOUND = 0.8
+
+
+def target_arg(text: str):
+    """The CLI's ``--target-psnr``: a PSNR in dB, or 'off' (a fixed bound)."""
+    return "off" if text.strip().lower() == "off" else float(text)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,29 +125,36 @@ class ScreenCriterion(Criterion):
     ``pixel_tolerance`` pixels per default bound E0 and the S-2 detail bound weighted by the pixels the node covers
     (above AREA_SHARE of the screen by the square root of its area), against ``error_bound`` in display units of
     white; ``target_psnr``: steer the bound toward this estimated PSNR of the frame (E-1..E-4, ``error_bound`` is
-    then the starting bound)."""
+    then the starting bound; DEFAULT_TARGET_PSNR unless a bound is given alone; "off" or None: a fixed bound)."""
 
-    error_bound: float = 0.8
-    target_psnr: float | None = None
+    error_bound: float | None = None  # None: SCREEN_BOUND
+    target_psnr: float | str | None = "default"  # DEFAULT_TARGET_PSNR, or None when a bound is given alone
     pixel_tolerance: float = PIXEL_TOLERANCE
 
     NAME: typing.ClassVar[str] = "screen"
     MODE: typing.ClassVar[int] = 0
     NODE_BOUNDS: typing.ClassVar[tuple[str, ...]] = ("detail",)
     KNOBS: typing.ClassVar[tuple[Knob, ...]] = (
-        Knob("error_bound", (0.0, 1.0), 0.8, "0.8 of white for 'screen': each coarse node adds at most E^2 / "
-             "32768 to the frame's mean squared error", "E"),
+        Knob("error_bound", (0.0, 1.0), 0.8, "0.8 of white for 'screen', where the default target's steering "
+             "starts; given alone, a fixed bound: each coarse node adds at most E^2 / 32768 to the frame's mean "
+             "squared error", "E"),
         Knob("target_psnr", None, None, "'screen': steer the bound toward this estimated PSNR of the frame against "
-             "the full mesh (E-1..E-4 in docs/RUNTIME.md; --error-bound is then the starting bound)", "DB"),
+             f"the full mesh (E-1..E-4 in docs/RUNTIME.md; default {DEFAULT_TARGET_PSNR:g}; --error-bound is then "
+             "the starting bound; 'off': a fixed bound, as when --error-bound or --triangle-budget is given alone)",
+             "DB", target_arg),
     )
     SUMMARY: typing.ClassVar[str] = ("'screen' bounds the error on screen (luminance in units of white, geometry in "
                                      "pixels; default)")
     IGNORES: typing.ClassVar[tuple[str, ...]] = ("alpha",)  # as before the criterion objects: accepted, unread
 
     def __post_init__(self):
-        super().__post_init__()
         from lodprt.runtime.frame_error import check_target
 
+        if isinstance(self.target_psnr, str) and self.target_psnr == "default":  # a bound given alone: fixed
+            object.__setattr__(self, "target_psnr", DEFAULT_TARGET_PSNR if self.error_bound is None else None)
+        if self.error_bound is None:
+            object.__setattr__(self, "error_bound", SCREEN_BOUND)
+        super().__post_init__()
         p = float(self.pixel_tolerance)
         if not p > 0 or not math.isfinite(p):
             raise LodprtError(f"pixel_tolerance {self.pixel_tolerance}: must be a positive number of pixels")
@@ -148,7 +167,7 @@ class ScreenCriterion(Criterion):
     def geo_rate(self) -> float:
         """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance; with a
         target_psnr the steered bound's, so that the geometric error stays at pixel_tolerance pixels)."""
-        bound = self.error_bound if self.target_psnr is not None else ScreenCriterion.error_bound
+        bound = self.error_bound if self.target_psnr is not None else SCREEN_BOUND
         return max(bound, 1e-12) / self.pixel_tolerance
 
     @staticmethod
@@ -196,7 +215,7 @@ class ThesisCriterion(Criterion):
 #: the criteria by name, the default first: the one registration a new criterion needs
 CRITERIA: dict[str, type[Criterion]] = {"screen": ScreenCriterion, "thesis": ThesisCriterion}
 #: default error bound of each criterion: display units of white for "screen", T-14's blend for "thesis"
-DEFAULT_ERROR_BOUND = {name: cls.error_bound for name, cls in CRITERIA.items()}
+DEFAULT_ERROR_BOUND = {name: cls().error_bound for name, cls in CRITERIA.items()}
 
 
 def make_criterion(name: str = "screen", **settings) -> Criterion:
@@ -237,4 +256,7 @@ def criterion_of(args) -> Criterion:
     """The criterion a parsed command line names: ``--criterion`` and every criterion's knobs (``KNOBS``, the
     options ``lodprt.cli.args.add_view_cut`` adds), through ``make_criterion``."""
     settings = {k.name: getattr(args, k.name, None) for c in CRITERIA.values() for k in c.KNOBS}
+    if getattr(args, "triangle_budget", None) is not None and args.criterion == "screen" and \
+            settings.get("target_psnr") is None:
+        settings["target_psnr"] = "off"  # the budget steers the bound instead
     return make_criterion(args.criterion, **settings)

@@ -40,12 +40,16 @@ BOUND_RANGE = (1e-4, 8.0)
 
 
 def check_target(psnr) -> float | None:
-    """``psnr`` as a float in (0, 200] dB, or None; LodprtError naming the field otherwise."""
-    if psnr is None:
+    """``psnr`` as a float in (0, 200] dB, or None (None or "off": no target); LodprtError naming the field
+    otherwise."""
+    if psnr is None or (isinstance(psnr, str) and psnr.strip().lower() == "off"):
         return None
-    p = float(psnr)
+    try:
+        p = float(psnr)
+    except (TypeError, ValueError):
+        p = float("nan")
     if not math.isfinite(p) or not 0 < p <= 200:
-        raise LodprtError(f"target_psnr {psnr}: must be a PSNR in dB in (0, 200]")
+        raise LodprtError(f"target_psnr {psnr}: must be a PSNR in dB in (0, 200], or 'off'")
     return p
 
 
@@ -144,7 +148,7 @@ class Steering:
             new = min(new, self.misses)
         if self.meets is not None:
             new = max(new, self.meets)
-        return new
+        return float(min(max(new, BOUND_RANGE[0]), BOUND_RANGE[1]))
 
 
 def estimate(rt, positions: np.ndarray, triangles: np.ndarray, steering: Steering | None = None,
@@ -172,20 +176,26 @@ def estimate(rt, positions: np.ndarray, triangles: np.ndarray, steering: Steerin
     return est, new
 
 
-#: E-2: one coverage ray per COVERAGE_STRIDE x COVERAGE_STRIDE pixels
-COVERAGE_STRIDE = 4
+#: E-2: about this many coverage rays per frame, one per square cell of the screen (at least a pixel)
+COVERAGE_RAYS = 10_000
+
+
+def coverage_stride(width: int, height: int) -> int:
+    """E-2: the side in pixels of the square screen cells, one coverage ray each (about COVERAGE_RAYS)."""
+    return max(1, int(math.sqrt(width * height / COVERAGE_RAYS)))
 
 
 def screen_hits(rt) -> tuple[np.ndarray, float]:
     """E-2's rays: the first face of the store's full mesh (-1: none) that a primary ray through the centre of each
-    COVERAGE_STRIDE x COVERAGE_STRIDE cell of the screen meets (``kernels.runtime.first_hits``, the scene's
+    ``coverage_stride`` square cell of the screen meets (``kernels.runtime.first_hits``, the scene's
     BVH), and the pixels one cell stands for."""
     import warp as wp
 
     from lodprt.kernels import runtime as kr
 
     cam = rt.camera
-    cols, rows = max(1, -(-cam.width // COVERAGE_STRIDE)), max(1, -(-cam.height // COVERAGE_STRIDE))
+    stride = coverage_stride(cam.width, cam.height)
+    cols, rows = max(1, -(-cam.width // stride)), max(1, -(-cam.height // stride))
     inv = np.linalg.inv(np.asarray(rt.vp, np.float64))
     eye = np.asarray(cam.eye, np.float64)
 

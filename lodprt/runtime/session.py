@@ -32,7 +32,7 @@ from lodprt.runtime import frame_error
 from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
 from lodprt.runtime.frames import Frame
-from lodprt.runtime.refinement import HYSTERESIS, REFRESH_FRAMES, CutRefinement, ErrorCache
+from lodprt.runtime.refinement import HYSTERESIS, CutRefinement, ErrorCache
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
 from lodprt.runtime.samples import default_white
@@ -45,8 +45,12 @@ log = logging.getLogger(__name__)
 #: LIGHT_JUMP of their sum, counts as a jump
 JUMP = 0.1
 LIGHT_JUMP = 0.4
-#: E-4: steering rounds of the first frame with a target_psnr (each converges the cut for the new bound)
+#: E-4: steering rounds of the first frame with a target_psnr and of a frame after the camera jumped (each converges
+#: the cut for the new bound)
 FIRST_ROUNDS = 12
+#: E-4: frames between two estimates of the frame's error while the steering searches (twice as many once it
+#: has settled)
+ESTIMATE_FRAMES = 4
 #: E-4: the relative change of the bound below which the steering keeps it
 STEER_STEP = 0.1
 
@@ -71,7 +75,8 @@ class Runtime:
     ``ThesisCriterion``: T-14) holding its settings, or its name ("screen", "thesis") with the settings as keywords:
     error_bound (refine above, coarsen at or below bound / HYSTERESIS; None: the criterion's default), alpha
     (T-14's weight of e_geo, "thesis"), pixel_tolerance and target_psnr ("screen": steer the bound toward this
-    estimated PSNR of the frame against the full mesh, E-1..E-4, ``error_bound`` being the starting bound);
+    estimated PSNR of the frame against the full mesh, E-1..E-4, ``error_bound`` being the starting bound; by
+    default ``criteria.DEFAULT_TARGET_PSNR``, off ("off") when error_bound or triangle_budget is given alone);
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
     percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
@@ -92,15 +97,18 @@ class Runtime:
                  triangle_budget: int | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 1,
                  lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None,
-                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr: float | None = None):
+                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr: float | str | None = None):
         from lodprt.devices import resolve_device
 
         #: the view cut's criterion, with its settings (the steering replaces it with one of another bound)
+        if triangle_budget is not None and target_psnr is None and criterion == "screen":
+            target_psnr = "off"  # the budget steers the bound instead of the default target
         self.criterion = resolve_criterion(criterion, error_bound=error_bound, alpha=alpha,
                                            pixel_tolerance=pixel_tolerance, target_psnr=target_psnr)
         if self.criterion.steered() and triangle_budget is not None:
             raise LodprtError("target_psnr steers the screen criterion's bound: not with a triangle_budget")
         self.estimated_psnr = None  # E-3 of the last estimate (target_psnr set)
+        self.view_jumped = False  # the camera jumped since the last frame (set_camera)
         #: E-4: the search for the largest bound whose frame meets target_psnr (None without a target)
         self.steering = frame_error.Steering(self.criterion.target_psnr, STEER_STEP) if self.criterion.steered() \
             else None
@@ -300,7 +308,7 @@ class Runtime:
         """LOD off shows the full mesh (every leaf active); on starts again from the base mesh."""
         self.lod = bool(enabled)
         self.refinement.reset(Cut.base(self.h, self.faces) if self.lod else Cut.full(self.h, self.faces))
-        self.errors.refresh_all = True
+        self.errors.refresh_all = self.view_jumped = True
 
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
@@ -325,7 +333,7 @@ class Runtime:
                                                          up=up, fov=fov, width=width, height=height, near=near, far=far))
         self.refinement.dirty = True
         if old is None or camera_jump(old, self.camera, JUMP):
-            self.errors.refresh_all = True
+            self.errors.refresh_all = self.view_jumped = True
         self.vp = view_projection(self.camera, self.bounds)
         self.planes = clip_planes(self.vp)
         return self.camera
@@ -421,18 +429,22 @@ class Runtime:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
         t0 = time.perf_counter()
         self.errors.frame += 1
-        first, jump = not self.refinement.converged_once, self.errors.refresh_all
-        if jump and self.steering is not None:  # E-4: after a jump the bounds tried so far say nothing
+        # E-4: a new view (the first frame, a camera jump) forgets the bounds tried so far and steers until its
+        # frame meets the target; a light that jumps is followed by the regular estimates (ESTIMATE_FRAMES)
+        settle = not self.refinement.converged_once or self.view_jumped
+        self.view_jumped = False
+        if settle and self.steering is not None:
             self.steering.reset()
         refined, coarsened, touched, passes = self._converge(max_passes)
         t1 = time.perf_counter()
         vid, tri = self._cut_mesh()
         t2 = time.perf_counter()
-        due = first or jump or self.errors.frame % REFRESH_FRAMES == 0  # E-4 every few frames and after a jump
+        every = ESTIMATE_FRAMES * (2 if self.steering is not None and self.steering.settled() else 1)
+        due = settle or self.errors.frame % every == 0  # E-4 every few frames, half as often once settled
         if self.lod and self.target_psnr is not None and due:  # E-4: steer the bound; the first frame until it holds
-            for _ in range(FIRST_ROUNDS if first else 1):
+            for _ in range(FIRST_ROUNDS if settle else 1):
                 self.estimate_frame_error(vid, tri)
-                if not first or not self.refinement.dirty:
+                if not settle or not self.refinement.dirty:
                     break
                 more = self._converge(10_000)
                 refined, coarsened, touched, passes = (a + b for a, b in zip((refined, coarsened, touched, passes),

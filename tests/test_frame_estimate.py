@@ -1,0 +1,182 @@
+"""The parts of the frame estimate (E-1..E-4, docs/RUNTIME.md) and of the view cut's default, each against its own
+oracle: E-2's primary rays (``kernels.runtime.first_hits``) against a float64 Moller-Trumbore caster written here,
+their coverage against the renderer's, S-3's subtree deviation against a walk of the hierarchy, the field the view
+cut bounds on a direct-only store (``DirectLight.drawn``) against the bake's own rows, and the default target:
+on unless a bound or a triangle budget is given alone."""
+
+import numpy as np
+import pytest
+
+from lodprt.errors import LodprtError
+
+
+def moller_trumbore(eye: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """float64: the nearest triangle each ray (eye + t dirs, t > 0) meets, -1 where none."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    e1, e2 = b - a, c - a
+    best = np.full(len(dirs), np.inf)
+    out = np.full(len(dirs), -1)
+    for k in range(len(tri)):
+        p = np.cross(dirs, e2[k])
+        det = p @ e1[k]
+        ok = np.abs(det) > 1e-12
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = eye - a[k]
+        u = (p @ s) * inv
+        q = np.cross(s, e1[k])
+        v = (dirs @ q) * inv
+        t = (q @ e2[k]) * inv
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9) & (t < best)
+        best[hit], out[hit] = t[hit], k
+    return out
+
+
+@pytest.mark.warp_debug
+def test_first_hits_agree_with_a_second_ray_caster(device):
+    """Three overlapping quads at different depths, one tilted: the face each grid ray meets first equals the
+    float64 caster's, on every device (rays within 1e-4 of an edge are not compared)."""
+    import warp as wp
+
+    from lodprt.kernels import runtime as kr
+
+    wp.init()
+    quads = [(-1.0, -1.0, 0.6, 0.4, -3.0), (-0.2, -0.7, 1.1, 0.9, -4.0), (-0.8, 0.1, 0.3, 1.2, -2.0)]
+    pts, faces = [], []
+    for i, (x0, y0, x1, y1, z) in enumerate(quads):
+        tilt = 0.3 * i
+        corners = [(x0, y0, z + tilt * y0), (x1, y0, z + tilt * y0), (x1, y1, z + tilt * y1), (x0, y1, z + tilt * y1)]
+        base = len(pts)
+        pts += corners
+        faces += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    pts, faces = np.array(pts), np.array(faces)
+    cols, rows = 37, 23
+    eye = np.array([0.05, 0.02, 0.0])
+    corner, du, dv = np.array([-0.6, 0.45, -1.0]), np.array([1.2 / cols, 0, 0]), np.array([0, -0.9 / rows, 0])
+    mesh = wp.Mesh(points=wp.array(pts.astype(np.float32), dtype=wp.vec3, device=device),
+                   indices=wp.array(faces.astype(np.int32).ravel(), dtype=wp.int32, device=device))
+    face = wp.zeros(cols * rows, dtype=wp.int32, device=device)
+    vec = lambda a: wp.vec3(*map(float, a))  # noqa: E731
+    wp.launch(kr.first_hits, dim=cols * rows, inputs=[mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
+              outputs=[face], device=device)
+    i, j = np.meshgrid(np.arange(cols), np.arange(rows))
+    dirs = corner + (i.ravel()[:, None] + 0.5) * du + (j.ravel()[:, None] + 0.5) * dv
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    ref = moller_trumbore(eye, dirs, pts[faces])
+    got = face.numpy()
+    assert (ref >= 0).sum() > 0.3 * len(ref) and (ref < 0).any() and len(set(ref[ref >= 0])) >= 4
+    # a ray near a shared edge may be given to either face: compare the quads there, the faces elsewhere
+    assert np.array_equal(np.where(got >= 0, got // 2, -1), np.where(ref >= 0, ref // 2, -1))
+    assert (got == ref).mean() > 0.95
+
+
+@pytest.mark.usefixtures("gl")
+def test_screen_hits_cover_what_the_renderer_covers(bunny_bake):
+    """E-2's count: the cells whose ray meets the scene, times the pixels a cell stands for, equals the pixels the
+    renderer covers drawing the full mesh (lit white), within 3% (the rays sample the cell centres)."""
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.camera import Camera, default_eye, scene_centre
+    from lodprt.runtime.frame_error import screen_hits
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(bunny_bake)
+    rt = Runtime(store, device="cpu", lod=False)
+    rt.set_lights(store.light_positions[4:5])
+    c, e = np.array(scene_centre(store)), np.array(default_eye(store))
+    for k, scale in enumerate((1.0, 0.3)):
+        rt.set_camera(Camera(eye=tuple(c + (e - c) * scale), target=tuple(c + [0.3 * k, 0, 0]), width=320,
+                             height=240))
+        face, cell = screen_hits(rt)
+        frame = rt.update()
+        frame.radiance[:] = 1.0  # every pixel the mesh covers lit, whether drawn per vertex or per pixel (SH)
+        frame.coefficients[:] = 0.0
+        frame.coefficients[:, :, 0] = 4.0
+        with Renderer() as r:
+            img = r.image(frame, linear=True)
+        covered = float((np.abs(img).sum(-1) > 0).sum())
+        assert 0.97 * covered <= (face >= 0).sum() * cell <= 1.03 * covered + cell
+
+
+def test_subtree_deviation_is_the_walk_of_the_hierarchy(bunny_hierarchy):
+    """S-3: for every node, |e_k| plus the largest deviation of a child, recursively from the leaves, capped at the
+    node's radius: the vectorised bottom-up pass equals an explicit post-order walk in float64."""
+    from lodprt.runtime import node_bounds
+
+    h = bunny_hierarchy
+    got = node_bounds.subtree_deviation(h, node_bounds.height_levels(h))
+    e = np.linalg.norm(np.asarray(h.error_vector, np.float64), axis=1)
+    V, N = h.num_vertices, h.num_nodes
+    raw = np.zeros(N)
+    raw[:V] = e[:V]
+    for k in range(V, N):  # children precede their parent in node order
+        a, b = h.children[k]
+        assert a < k and b < k
+        raw[k] = e[k] + max(raw[a], raw[b])
+    ref = np.minimum(raw, np.asarray(h.radius, np.float64))
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=0)
+    assert (got[V:] > 0).mean() > 0.9  # not vacuous: internal nodes deviate
+
+
+@pytest.mark.warp_debug
+def test_drawn_field_is_the_bake_where_the_light_cut_kept_vertices(bunny_bake):
+    """On a direct-only light-cut store the field the view cut bounds is the exact direct light (D_j V_j): at the
+    vertices the bake kept it equals the stored rows, and elsewhere it departs from the cut's linear completion
+    (shadow edges the completion smooths)."""
+    from lodprt.runtime.direct_light import DirectLight
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(bunny_bake)
+    d = DirectLight(store, "cpu")
+    assert not d.residual
+    for sample in (0, 4):
+        ids, rows = store.sample(sample)
+        done = store.complete(sample).astype(np.float32)
+        drawn = d.drawn(sample, done)
+        assert drawn.shape == done.shape
+        scale = float(np.abs(rows).max())
+        np.testing.assert_allclose(drawn[ids], rows, atol=2e-3 * scale)
+        other = store.referenced.copy()
+        other[ids] = False
+        assert np.abs(drawn[other] - done[other]).max() > 0.05 * scale
+        assert np.array_equal(drawn[~store.referenced], done[~store.referenced])
+
+
+def test_the_default_is_a_frame_target():
+    """The screen criterion steers toward DEFAULT_TARGET_PSNR unless a bound is given alone (a fixed bound) or the
+    target is 'off'; a target with a bound starts the steering there; a bad target names the field."""
+    from lodprt.runtime.criteria import DEFAULT_TARGET_PSNR, make_criterion
+
+    assert make_criterion().target_psnr == DEFAULT_TARGET_PSNR and make_criterion().steered()
+    assert make_criterion(error_bound=0.3).target_psnr is None
+    assert make_criterion(error_bound=0.3, target_psnr=30).target_psnr == 30.0
+    assert make_criterion(target_psnr="off").target_psnr is None
+    assert make_criterion(target_psnr="OFF", error_bound=0.2).error_bound == 0.2
+    assert not make_criterion("thesis").steered()
+    for bad in ("loud", -3.0, float("nan"), 500):
+        with pytest.raises(LodprtError, match="target_psnr"):
+            make_criterion(target_psnr=bad)
+
+
+def test_cli_target_off_and_budget(bunny_bake):
+    """``--target-psnr off`` and ``--triangle-budget`` alone give a fixed-bound criterion; the default CLI steers;
+    a Runtime with a budget alone runs under the budget, not the target."""
+    import argparse
+
+    from lodprt.cli import args as cli_args
+    from lodprt.runtime.criteria import criterion_of
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    p = argparse.ArgumentParser()
+    cli_args.add_view_cut(p)
+    p.add_argument("--triangle-budget", type=int, default=None)
+    assert criterion_of(p.parse_args([])).steered()
+    assert not criterion_of(p.parse_args(["--target-psnr", "off"])).steered()
+    assert not criterion_of(p.parse_args(["--triangle-budget", "5000"])).steered()
+    assert criterion_of(p.parse_args(["--target-psnr", "31"])).target_psnr == 31.0
+    with pytest.raises(SystemExit):
+        p.parse_args(["--target-psnr", "loud"])
+    rt = Runtime(open_store(bunny_bake), device="cpu", triangle_budget=4000)
+    assert rt.steering is None and rt.triangle_budget == 4000
+    with pytest.raises(LodprtError, match="triangle_budget"):
+        Runtime(open_store(bunny_bake), device="cpu", triangle_budget=4000, target_psnr=30)
