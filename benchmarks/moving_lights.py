@@ -1,6 +1,6 @@
 """Lights between samples: error against frame time and bytes of each run-time interpolation (M-1..M-4, T-12).
 
-    python benchmarks/moving_lights.py [--quick] [--mitsuba] [--json PATH] [--device cpu|cuda]
+    python benchmarks/moving_lights.py [--quick] [--mitsuba | --only-mitsuba] [--json PATH] [--device cpu|cuda]
 
 Scenes: the Stanford bunny, spot and fandisk (tests/data), each on a 200 x 200 floor (quick: the bunny on 60 x 60), the
 thesis material, SH order 4, light cut at 5 degrees (the bake's defaults), one vertex hierarchy per scene shared by
@@ -20,9 +20,10 @@ each interpolation (``Runtime(interpolation=...)``: "direct", the default; "dire
 * ``bytes`` and ``bake_s``: the store's payload and bake time (one store serves every interpolation: the direct
   path reads nothing more from it).
 
-``--mitsuba``: the bunny on the thesis' 380 x 380 floor, diffuse (ks = 0), a full-resolution store, the light
-halfway between four samples and on sample 4: the full-mesh frame of each interpolation against Mitsuba 3's
-direct light (PSNR), and a figure (moving_lights-mitsuba.png).
+``--mitsuba`` (``--only-mitsuba``: nothing else): the bunny on the thesis' 380 x 380 floor, diffuse (ks = 0), a
+full-resolution store and light-cut stores at 5 and 30 degrees (one hierarchy), the light halfway between four
+samples and on sample 4: the full-mesh frame of each interpolation (cut stores: "direct" and "thesis") against
+Mitsuba 3's direct light (PSNR), moving_lights-mitsuba[-quick].json and a figure (moving_lights-mitsuba.png).
 Writes benchmarks/results/moving_lights[-quick].json and .png (error against frame time and against bytes).
 """
 
@@ -174,11 +175,18 @@ def run_scene(name: str, floor: int, grids, count: int, frames: int, device: str
     return rows
 
 
+#: the light cuts (degrees) whose stores the Mitsuba check renders besides the full-resolution store, and the
+#: interpolations it draws them with (the default, and T-12 which reads the cut's samples)
+MITSUBA_CUTS, CUT_METHODS = (5.0, 30.0), ("direct", "thesis")
+
+
 def mitsuba_check(device: str, tmp: Path, quick: bool) -> dict:
     """The full-mesh frame of each interpolation against Mitsuba 3's direct light, light between samples and on
-    one, the bunny on the thesis' floor (diffuse, full-resolution store)."""
+    one, the bunny on the thesis' floor (diffuse): from the full-resolution store (keys ``case/method``) and from
+    light-cut stores at MITSUBA_CUTS degrees (``case/method@deg``) sharing its hierarchy."""
     from mitsuba_ref import mitsuba_image, psnr
     from lodprt.display.render import Renderer
+    from lodprt.model.hierarchy_build import build_hierarchy
     from lodprt.precompute.bake import bake
     from lodprt.runtime.camera import Camera
     from lodprt.runtime.session import Runtime
@@ -186,28 +194,35 @@ def mitsuba_check(device: str, tmp: Path, quick: bool) -> dict:
 
     floor = 100 if quick else 380
     scene = model_scene("bunny", floor, (3, 1, 3), ks=0.0)
-    path = tmp / "mitsuba.zarr"
-    bake(scene, path, sh_order=4, device=device, threshold_deg=None)
-    store = open_store(path)
+    tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
+    stores = {}
+    for thr in (None,) + MITSUBA_CUTS:
+        path = tmp / f"mitsuba-{thr}.zarr"
+        bake(scene, path, sh_order=4, device=device, threshold_deg=thr, tree=tree)
+        stores[thr] = open_store(path)
     eye, target, fov, size, ss = eye_of(scene), scene.positions[scene.object_id == 0].mean(0), 40.0, (320, 240), 3
-    samples = store.light_positions.astype(np.float64)
+    samples = stores[None].light_positions.astype(np.float64)
     cases = {"between": samples[[0, 1, 3, 4]].mean(0), "on sample 4": samples[4]}
-    out, images = {"floor": floor, "eye": eye.tolist(), "lights": {k: v.tolist() for k, v in cases.items()}}, {}
+    out, images = {"floor": floor, "eye": eye.tolist(), "lights": {k: v.tolist() for k, v in cases.items()},
+                   "cuts": list(MITSUBA_CUTS)}, {}
     cam = Camera(eye=tuple(eye), target=tuple(target), fov=fov, width=size[0] * ss, height=size[1] * ss)
     with Renderer() as r:
         for case, light in cases.items():
             ref = mitsuba_image(scene, light, scene.lights.intensity, 0, size, 64, tmp, camera=(eye, target, fov))
             white = float(np.percentile(ref[ref.max(2) > 0].max(1), 99))
             images[(case, "Mitsuba 3")] = ref
-            for method in METHODS:
-                rt = Runtime(store, device=device, lod=False, interpolation=method)
-                rt.set_lights(light[None])
-                rt.set_camera(cam)
-                img = r.image(rt.update(), camera=cam, linear=True, light_markers=False).astype(np.float64)
-                img = img.reshape(size[1], ss, size[0], ss, 3).mean((1, 3))
-                out[f"{case}/{method}"] = psnr(img, ref, white)
-                images[(case, method)] = img
-                print(f"  Mitsuba 3, light {case}: {method} {out[f'{case}/{method}']:.1f} dB", flush=True)
+            for thr, store in stores.items():
+                for method in METHODS if thr is None else CUT_METHODS:
+                    rt = Runtime(store, device=device, lod=False, interpolation=method)
+                    rt.set_lights(light[None])
+                    rt.set_camera(cam)
+                    img = r.image(rt.update(), camera=cam, linear=True, light_markers=False).astype(np.float64)
+                    img = img.reshape(size[1], ss, size[0], ss, 3).mean((1, 3))
+                    key = f"{case}/{method}" + ("" if thr is None else f"@{thr:g}")
+                    out[key] = psnr(img, ref, white)
+                    if thr is None:
+                        images[(case, method)] = img
+                    print(f"  Mitsuba 3, light {case}: {key.split('/')[1]} {out[key]:.1f} dB", flush=True)
     mitsuba_figure(images, out, cases, white, "moving_lights-mitsuba" + ("-quick" if quick else ""))
     return out
 
@@ -271,6 +286,7 @@ def plot(rows, name: str) -> None:
 def main():
     p = parser(__doc__.splitlines()[0])
     p.add_argument("--mitsuba", action="store_true", help="also compare full-mesh frames with Mitsuba 3")
+    p.add_argument("--only-mitsuba", action="store_true", help="only the Mitsuba 3 comparison")
     args = p.parse_args()
     from lodprt.devices import resolve_device
     from lodprt.display.render import Renderer
@@ -281,22 +297,29 @@ def main():
     count, frames = (3, 12) if args.quick else (6, 48)
     tmp = Path(tempfile.mkdtemp(prefix="lodprt-moving-"))
     rows, mitsuba = [], None
+    suffix = "-quick" if args.quick else ""
     try:
-        with Renderer() as renderer:
-            for name in scenes:
-                rows += run_scene(name, floor, grids, count, frames, device, tmp, renderer)
-        if args.mitsuba:
+        if not args.only_mitsuba:
+            with Renderer() as renderer:
+                for name in scenes:
+                    rows += run_scene(name, floor, grids, count, frames, device, tmp, renderer)
+        if args.mitsuba or args.only_mitsuba:
             mitsuba = mitsuba_check(device, tmp, args.quick)
+            print("wrote", write("moving_lights-mitsuba" + suffix, {"benchmark": "moving_lights", "quick": args.quick,
+                                                                   "environment": environment(device),
+                                                                   "mitsuba": mitsuba}, None))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    if args.only_mitsuba:
+        return
     print(table(rows, [("scene", "scene", "s"), ("grid", "grid", "s"), ("method", "interpolation", "s"),
                        ("rrmse", "rRMSE", ".4f"), ("rrmse_worst", "worst light", ".4f"),
                        ("rrmse_on_samples", "on samples", ".4f"), ("off5", ">5% off", ".3f"),
                        ("psnr_db", "PSNR dB", ".1f"), ("ms", "ms/frame", ".1f"), ("p95_ms", "p95 ms", ".1f"),
                        ("ms_ratio", "x thesis", ".2f"), ("bytes", "bytes", ",d"), ("bake_s", "bake s", ".1f")]))
-    name = "moving_lights" + ("-quick" if args.quick else "")
+    name = "moving_lights" + suffix
     print("wrote", write(name, {"benchmark": "moving_lights", "quick": args.quick, "floor": floor,
-                                "environment": environment(device), "rows": rows, "mitsuba": mitsuba}, args.json))
+                                "environment": environment(device), "rows": rows}, args.json))
     plot(rows, name)
 
 

@@ -7,10 +7,11 @@ degrees (the thesis' setting for its run-time figures 21-24), baked here into a 
 names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
 
 1. Camera paths (``lodprt.runtime.camera_path``): an orbit and a dolly, each with a light circling inside the
-   sampled region, 800 x 600 screen, two view cuts: the thesis criterion (T-14, error bound 0.25, alpha 0.6) and
-   the default "screen" criterion at its default bound. Per frame: ``Runtime.update()`` split into cut update,
+   sampled region, 800 x 600 screen, three view cuts: the thesis criterion (T-14, error bound 0.25, alpha 0.6),
+   the default (the "screen" criterion steered toward its frame target, E-1..E-4) and the "screen" criterion at a
+   fixed 0.8. Per frame: ``Runtime.update()`` split into cut update,
    triangulation and relighting (ms), and triangles. Baseline in the same run: the same paths with LOD off (the
-   full mesh relit every frame by the same kernel). The three are stepped in lockstep, frame by frame, so that
+   full mesh relit every frame by the same kernel). The four are stepped in lockstep, frame by frame, so that
    the machine's slow spells fall on all of them (``run_paths``).
 2. Error-bound sweep of the thesis criterion, 0.2, 0.25, 0.315, 0.4 at alpha 0.6, over the orbit (120 frames; quick: 40): median
    triangles beside the thesis' figures 21-24, median frame time (``stats["ms_total"]`` of ``Runtime.update()``,
@@ -134,21 +135,23 @@ def main():
         t = time.perf_counter()
         lod = Runtime(store, error_bound=0.25, alpha=0.6, criterion="thesis", device=device)
         init_s = time.perf_counter() - t
-        screen = Runtime(store, device=device)  # the default criterion and bound
+        screen = Runtime(store, device=device)  # the default: the screen criterion steered to its frame target
+        fixed = Runtime(store, error_bound=0.8, device=device)  # the screen criterion at a fixed 0.8
         full = Runtime(store, lod=False, device=device)
+        modes = {"lod": "thesis 0.25", "screen": f"default (target {screen.target_psnr:g} dB)",
+                 "fixed": "screen 0.8 fixed", "full": "full mesh"}
+        runtimes = {"lod": lod, "screen": screen, "fixed": fixed, "full": full}
         paths = {}
         for kind in ("orbit", "dolly"):
-            paths[kind] = run_paths({"lod": lod, "screen": screen, "full": full}, kind, frames)
-            lod.set_lod(True)  # the dolly starts again from the base mesh, like a fresh view
-            screen.set_lod(True)
-            s, c, b = (summary(paths[kind][m]) for m in ("lod", "screen", "full"))
-            print(f"{kind}: view cut (thesis 0.25) {s['median_ms_total']:.1f} ms ({s['median_triangles']:,.0f} tri), "
-                  f"(screen {screen.error_bound:g}) {c['median_ms_total']:.1f} ms ({c['median_triangles']:,.0f} tri), "
-                  f"full mesh {b['median_ms_total']:.1f} ms ({b['median_triangles']:,.0f} tri)", flush=True)
+            paths[kind] = run_paths(runtimes, kind, frames)
+            for rt in (lod, screen, fixed):
+                rt.set_lod(True)  # the dolly starts again from the base mesh, like a fresh view
+            print(f"{kind}: " + ", ".join(f"{label} {summary(paths[kind][m])['median_ms_total']:.1f} ms "
+                                          f"({summary(paths[kind][m])['median_triangles']:,.0f} tri)"
+                                          for m, label in modes.items()), flush=True)
         rows = []
         for kind, runs in paths.items():
-            for mode, label in (("lod", "thesis 0.25"), ("screen", f"screen {screen.error_bound:g}"),
-                                ("full", "full mesh")):
+            for mode, label in modes.items():
                 rows.append({"path": kind, "mode": label, **summary(runs[mode])})
         for r in rows:
             base = next(x for x in rows if x["path"] == r["path"] and x["mode"] == "full mesh")
