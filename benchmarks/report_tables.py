@@ -165,7 +165,7 @@ def hierarchy(r: dict) -> str:
                      mem, n(row["roots"]) if "roots" in row else "", row.get("depth", ""),
                      n(row["light_cut_vertices"]) if "light_cut_vertices" in row else "", view])
     return md(["mesh", "build", "build s", "peak B/vertex", "roots", "depth", "5-degree light cut (vertices)",
-               "view cut at the default bound, one view"], rows)
+               "view cut at the screen bound 0.8, one view"], rows)
 
 
 def scale_hierarchy(r: dict) -> str:

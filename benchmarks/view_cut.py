@@ -131,14 +131,17 @@ def static_views(store, name: str, renderer, device: str, family: str = "shared"
         rt.set_lights(light)
         for view, cam in views.items():
             rt.set_camera(cam)
-            lod = rt.update(max_passes=10_000)  # a new view: under a target the steering settles in this frame
-            for _ in range(STILL_FRAMES):  # ... or in the frames of a still camera that follow
+            lod = rt.update(max_passes=10_000)
+            for _ in range(STILL_FRAMES):  # a still camera: under a target, frames until the steering settles
                 if rt.steering is None or rt.steering.settled():
                     break
                 lod = rt.update(max_passes=10_000)
+            if rt.steering is not None:  # the frame at the bound the search settled on, and its own estimate
+                lod = rt.update(max_passes=10_000)
+                rt.estimate_frame_error(lod.vertex_ids, lod.triangles, steer=False)
             full = fulls[view]
             numbers = frame_error(renderer, lod, full, rt.white)[0]
-            est = lod.stats.get("estimated_psnr_db")  # E-3, made only under a target_psnr
+            est = rt.estimated_psnr  # E-3 of this frame, made only under a target_psnr
             label = rt.criterion.name + (f", target {rt.target_psnr:g} dB" if rt.target_psnr else "")
             out.append({"scene": name, "family": family, "view": view, "setting": setting,
                         "criterion": f"{setting}: {label} (bound {rt.error_bound:.3g})",

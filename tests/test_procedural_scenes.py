@@ -156,35 +156,40 @@ def test_view_cut_scene_selection():
         names(only=["nonesuch"])
 
 
-def static_row(scene, family, view, criterion, psnr, fewer):
-    return {"scene": scene, "family": family, "view": view, "criterion": f"{criterion} (bound 0.8)",
+def static_row(scene, family, view, setting, psnr, fewer):
+    """A row of view_cut.py's static views under one of its STATIC_SETTINGS."""
+    criterion = {"default": "screen (target 36 dB)", "screen": "screen (bound 0.8)", "thesis": "thesis"}[setting]
+    return {"scene": scene, "family": family, "view": view, "setting": setting, "criterion": criterion,
             "triangles": round(1000 / fewer), "full": 1000, "fewer": fewer, "psnr_db": psnr,
-            "estimated_psnr_db": float("nan")}
+            "estimated_psnr_db": psnr - 2.0 if setting == "default" else float("nan")}
 
 
 def test_static_summary_and_its_tables():
     import report_tables
     import view_cut
 
-    rows = [static_row("spot", "shared", "front", "screen", 41.0, 6.0),
+    rows = [static_row("spot", "shared", "front", "default", 39.0, 5.0),
+            static_row("spot", "shared", "front", "screen", 41.0, 6.0),
             static_row("spot", "shared", "front", "thesis", 25.0, 60.0),
             static_row("comb", "procedural", "front", "screen", 33.5, 9.0),
             static_row("comb", "procedural", "default eye", "screen", 39.0, 3.5),
             static_row("comb", "procedural", "front", "thesis", 20.0, 50.0),
             static_row("comb", "procedural", "default eye", "thesis", 22.0, 40.0)]
     summary = view_cut.static_summary(rows)
-    assert [s["criterion"] for s in summary] == ["screen", "thesis"]
-    screen = summary[0]
+    assert [s["criterion"] for s in summary] == ["default", "screen", "thesis"]
+    assert (summary[0]["rows"], summary[0]["worst_psnr_db"], summary[0]["least_fewer"]) == (1, 39.0, 5.0)
+    screen = summary[1]
     assert (screen["rows"], screen["worst_psnr_db"], screen["least_fewer"]) == (3, 33.5, 3.5)
-    assert summary[1]["worst_psnr_db"] == 20.0 and summary[1]["least_fewer"] == 40.0
+    assert summary[2]["worst_psnr_db"] == 20.0 and summary[2]["least_fewer"] == 40.0
     assert screen["worst_psnr_at"] == "comb, front" and screen["least_fewer_at"] == "comb, default eye"
     r = {"floor": 200, "static_views": rows, "static_summary": summary}
     shared = report_tables.view_cut_static(r)
     assert "spot + 200" in shared and "comb" not in shared
+    assert "| 200 / 1,000 | 5.0 | 39.0 dB | 37.0 dB | 6.0 | 41.0 dB | 60 | 25.0 dB |" in shared  # the default beside the fixed bound
     made = report_tables.view_cut_procedural(r)
     assert "| comb | front |" in made and "spot" not in made
     assert "33.5 dB | comb, front" in report_tables.view_cut_summary(r)
-    old = {"floor": 200, "static_views": rows[:2]}  # results from before the procedural scenes
+    old = {"floor": 200, "static_views": rows[:3]}  # results from before the procedural scenes
     assert report_tables.view_cut_procedural(old) == report_tables.NOT_MEASURED
     assert report_tables.view_cut_summary(old) == report_tables.NOT_MEASURED
 

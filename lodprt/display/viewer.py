@@ -499,5 +499,7 @@ def run_viewer(store, *, frames: int | None = None, screenshot=None, **options) 
     viewer = Viewer(store, **options)
     print(f"lodprt view: {store.path} - H prints the controls, Q quits")
     n = viewer.run(frames, screenshot=screenshot)
-    print(f"lodprt view: closed after {n} frames")
+    est = None if viewer.frame is None else viewer.frame.stats.get("estimated_psnr_db")
+    print(f"lodprt view: closed after {n} frames ({viewer.state.knobs()}"
+          + ("" if est is None else f", estimated {est:.1f} dB") + ")")
     return 0

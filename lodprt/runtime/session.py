@@ -45,8 +45,7 @@ log = logging.getLogger(__name__)
 #: LIGHT_JUMP of their sum, counts as a jump
 JUMP = 0.1
 LIGHT_JUMP = 0.4
-#: E-4: steering rounds of the first frame with a target_psnr and of a frame after the camera jumped (each converges
-#: the cut for the new bound)
+#: E-4: steering rounds of the first frame with a target_psnr (each converges the cut for the new bound)
 FIRST_ROUNDS = 12
 #: E-4: frames between two estimates of the frame's error while the steering searches (twice as many once it
 #: has settled)
@@ -394,12 +393,12 @@ class Runtime:
         lut[vid] = np.arange(len(vid), dtype=np.int32)
         return vid, np.take(lut, self._tri.faces(self.cut.anc))
 
-    def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray) -> None:
-        """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr, E-4: the bound for the next
-        frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the cached errors
-        stay: a node cached under the old bound is evaluated again when due)."""
-        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri, self.steering,
-                                                        lit=self.lit_vertices())
+    def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, *, steer: bool = True) -> None:
+        """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr and ``steer``, E-4: the bound
+        for the next frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the
+        cached errors stay: a node cached under the old bound is evaluated again when due)."""
+        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri,
+                                                        self.steering if steer else None, lit=self.lit_vertices())
         if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
 
@@ -429,11 +428,11 @@ class Runtime:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
         t0 = time.perf_counter()
         self.errors.frame += 1
-        # E-4: a new view (the first frame, a camera jump) forgets the bounds tried so far and steers until its
-        # frame meets the target; a light that jumps is followed by the regular estimates (ESTIMATE_FRAMES)
-        settle = not self.refinement.converged_once or self.view_jumped
+        # E-4: the first frame steers until it meets the target; a camera jump forgets the bounds tried so far; the
+        # estimates follow every ESTIMATE_FRAMES frames (a jump of the camera or the lights waits for its turn)
+        settle, jumped = not self.refinement.converged_once, self.view_jumped
         self.view_jumped = False
-        if settle and self.steering is not None:
+        if (settle or jumped) and self.steering is not None:
             self.steering.reset()
         refined, coarsened, touched, passes = self._converge(max_passes)
         t1 = time.perf_counter()
