@@ -76,6 +76,12 @@ def register(sub) -> None:
                     help="light cut: gather indirect light only on the indirect cut, whose nodes' bounding spheres "
                     "and normal cones span at most E degrees seen from the nearest surface (default 10); the other "
                     "vertices are completed (T-15)")
+    gi.add_argument("--indirect-tolerance", type=float, default=None, metavar="TAU",
+                    help="light cut: choose where to gather per sample and pass by the indirect light itself "
+                    "instead of --indirect-threshold-deg (G-9): refine from a coarse level of the hierarchy where "
+                    "the gathered irradiance departs from its completion (T-15), within a budget: each pass' "
+                    "completed radiance within TAU times the RMS direct radiance (RMS over the vertices) of "
+                    "gathering at every vertex (e.g. 0.01; in (0, 1]; default: off; docs/GI.md)")
     b.add_argument("--compress", default="none", metavar="CODEC",
                    help="store the light samples with a lossy codec (format version 2, docs/FORMAT.md): none "
                    "(default, float32), f16, q8, q10, q12 (integers per vertex and SH band) or "
@@ -132,6 +138,7 @@ def cmd_bake(args) -> int:
             bounce_threshold=args.bounce_threshold,
             gi_rays=args.gi_rays,
             indirect_threshold_deg=args.indirect_threshold_deg,
+            indirect_tolerance=args.indirect_tolerance,
             compress=args.compress,
         )
     _report(scene, res)

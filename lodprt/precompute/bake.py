@@ -179,6 +179,7 @@ def bake(
     bounce_threshold: float = 1e-3,
     gi_rays: int = 64,
     indirect_threshold_deg: float | None = 10.0,
+    indirect_tolerance: float | None = None,
     resume: bool = False,
     add_samples: bool = False,
     workers: int | None = None,
@@ -206,7 +207,7 @@ def bake(
     """
     from lodprt.precompute.gi import GISettings, gi_attributes
 
-    gi = GISettings(bounces, bounce_threshold, gi_rays, indirect_threshold_deg)
+    gi = GISettings(bounces, bounce_threshold, gi_rays, indirect_threshold_deg, indirect_tolerance=indirect_tolerance)
     device = resolve_device(device)
     threshold_deg = light_cut_threshold(threshold_deg, full=full, hierarchy=hierarchy)
     check_hierarchy(hierarchy, threshold_deg, hierarchy_method)

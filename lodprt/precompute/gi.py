@@ -7,7 +7,9 @@ is still computed at every vertex (one shadow ray each, which the cut needs anyw
 vertices of the *indirect cut* (G-5, light-independent, built once per bake from harmonic mean hit distances and
 normal cones) and T-15 completes the rest; the stored cut is the common refinement (G-6) of the light cut, the
 indirect cut and the ring-purity front (collapses whose T-15 rings mix directly lit and unlit vertices are split),
-and no node is dark unless its radiance is exactly zero (G-7).
+and no node is dark unless its radiance is exactly zero (G-7). With ``indirect_tolerance`` the indirect cut is
+error-driven instead (G-9, :mod:`lodprt.precompute.indirect_cut`): per sample and pass, refined from a coarse level
+where the gathered irradiance departs from its T-15 prediction, within a stated error budget per pass.
 """
 
 from __future__ import annotations
@@ -64,7 +66,8 @@ class GISettings:
     bounces: diffuse passes after the direct term (0: the direct-only bake); threshold: stop early once a pass'
     mean radiance is below ``threshold`` times the direct term's; rays: gathering rays per vertex and pass;
     indirect_threshold_deg: angle of the indirect cut (G-5; None gathers at every vertex the light cut keeps);
-    seed: of the per-vertex rotations of the ray set.
+    seed: of the per-vertex rotations of the ray set; indirect_tolerance: when set, the error-driven indirect cut
+    (G-9) replaces G-5: the RMS error each pass may leave over the vertices, relative to the RMS direct radiance.
     """
 
     bounces: int = 0
@@ -72,6 +75,7 @@ class GISettings:
     rays: int = 64
     indirect_threshold_deg: float | None = 10.0
     seed: int = 0
+    indirect_tolerance: float | None = None
 
     def __post_init__(self):
         if isinstance(self.bounces, bool) or int(self.bounces) != self.bounces or not 0 <= self.bounces <= 64:
@@ -83,13 +87,19 @@ class GISettings:
         t = self.indirect_threshold_deg
         if t is not None and not (math.isfinite(t) and 0 <= t <= 180):
             raise LodprtError(f"indirect_threshold_deg {t!r}: must lie in [0, 180] degrees")
+        tol = self.indirect_tolerance
+        if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
+                                or not 0 < tol <= 1):
+            raise LodprtError(f"indirect_tolerance {tol!r}: must be a number in (0, 1] (a relative RMS error of "
+                              "the indirect radiance, G-9) or None for the geometric indirect cut (G-5)")
 
     def attributes(self) -> dict:
         """The store's root attributes of these settings (docs/FORMAT.md)."""
         return {"bounces": int(self.bounces), "bounce_threshold": float(self.threshold), "gi_rays": int(self.rays),
                 "gi_directions": "cosine-spherical-fibonacci", "gi_seed": int(self.seed),
                 "indirect_threshold_deg": None if self.indirect_threshold_deg is None
-                else float(self.indirect_threshold_deg)}
+                else float(self.indirect_threshold_deg),
+                "indirect_tolerance": None if self.indirect_tolerance is None else float(self.indirect_tolerance)}
 
 
 class Interreflection:
@@ -114,6 +124,7 @@ class Interreflection:
         self.max_dist = 4.0 * float(scene.diagonal) + 1.0
         self.positions, self.normals = scene.positions, scene.normals
         self.energy: dict[int, list[float]] = {}  # per light sample, the passes' mean radiance (direct first)
+        self.gathered: dict[tuple, list[int]] = {}  # per light sample, each pass' gathering vertices (G-9)
         self._lock = threading.Lock()
         self.cut_state = None
 
@@ -181,6 +192,52 @@ class Interreflection:
         spec = complete(specular.numpy().astype(np.float64)) if spec_on and len(energies) > 1 else None
         return total, spec, energies
 
+    def _passes_refined(self, light, visible_all):
+        """Bounce 0 at every referenced vertex, then each pass on its own error-driven indirect cut (G-9).
+        Returns (sum of E_b over the passes (V, C), specular coefficients (V, C, ncoef) or None, energies, the
+        active ancestor (V,) of each vertex on the deepest of the passes' fronts or None without passes, the
+        number of gathering vertices of each pass)."""
+        from lodprt.precompute.indirect_cut import refine_pass
+
+        wp, b, st, cs = self.wp, self.baker, self.settings, self.cut_state
+        rad = self._direct(light, b.ids, visible_all)
+        direct = rad.numpy().astype(np.float64)
+        energies = [self._energy(direct)]
+        ref = self.referenced
+        l_rms = math.sqrt(float(np.mean(direct[ref].mean(1) ** 2))) if ref.any() else 0.0
+        tol = st.indirect_tolerance * l_rms  # G-9: the RMS error a pass may leave, tau L_rms
+        total = np.zeros((self.V, b.channels))
+        spec_on = b.ncoef > 1
+        spec_total, anc, counts = None, None, []
+
+        def complete(ids, values):
+            return cs.plan.complete(ids, values, self.V)  # T-15 from the gathering vertices
+
+        for bounce in range(st.bounces):
+            if energies[0] <= 0.0:
+                break  # nothing is lit: no light to reflect
+
+            def gather(ids, previous=rad, bounce=bounce):
+                specular = wp.zeros((len(ids), b.channels, b.ncoef if spec_on else 1), dtype=wp.float32,
+                                    device=b.device)
+                e = self._gather(wp.array(ids, dtype=wp.int32, device=b.device), previous, bounce, specular)
+                return e, specular.numpy().astype(np.float64) if spec_on else None
+
+            ids, e, spec, front, _ = refine_pass(cs.levels, gather, complete, self.kd_v, tol)  # G-9
+            counts.append(len(ids))
+            e_full = complete(ids, e)
+            total += e_full
+            if spec is not None:
+                spec_total = complete(ids, spec) + (0.0 if spec_total is None else spec_total)
+            a = active_ancestors(cs.h, front)
+            anc = a if anc is None else np.minimum(anc, a)  # the deepest front of the passes (G-6)
+            radiance = self.kd_v * e_full  # G-1
+            energies.append(self._energy(radiance))
+            if energies[-1] < st.threshold * energies[0] or bounce == st.bounces - 1:
+                break
+            rad = wp.array(radiance.astype(np.float32), dtype=wp.float32, device=b.device)
+        return total, spec_total, energies, anc, counts
+
     def _coefficients(self, ids: np.ndarray, total: np.ndarray, spec) -> np.ndarray:
         """(K, C, ncoef) float32 indirect SH coefficients of vertices ``ids`` (G-4: diffuse in y_0 alone)."""
         b = self.baker
@@ -190,17 +247,26 @@ class Interreflection:
         out[:, :, 0] += self.y0 * self.kd_v[ids] * total[ids]
         return out.astype(np.float32)
 
-    def _remember(self, light, energies) -> None:
+    def _remember(self, light, energies, gathered=None) -> None:
         with self._lock:
             self.energy[tuple(float(x) for x in light)] = energies
+            if gathered is not None:
+                self.gathered[tuple(float(x) for x in light)] = gathered
 
     def sample_attributes(self, light) -> dict:
         """What a light sample's group records of its interreflection: each pass' mean radiance (bounce 0 first)
         and the vertices the indirect cut gathers at (``gi_attributes`` assembles the root's from them, so a
         sample baked on a dask worker or in an earlier, resumed run counts the same)."""
-        energy = self.energy.get(tuple(float(x) for x in light), [])
-        return {"bounce_energy": [float(e) for e in energy],
-                "indirect_gather_vertices": None if self.cut_state is None else int(len(self.cut_state.gather_ids))}
+        key = tuple(float(x) for x in light)
+        energy = self.energy.get(key, [])
+        if self.cut_state is None:
+            gather = None
+        elif self.cut_state.gather_ids is None:  # G-9: the mean over the sample's passes
+            passes = self.gathered.get(key, [])
+            gather = int(round(float(np.mean(passes)))) if passes else 0
+        else:
+            gather = int(len(self.cut_state.gather_ids))
+        return {"bounce_energy": [float(e) for e in energy], "indirect_gather_vertices": gather}
 
     def pass_radiance(self, light) -> list[np.ndarray]:
         """Each pass' outgoing diffuse radiance (V, C) float64 at full resolution, bounce 0 first (references)."""
@@ -249,9 +315,14 @@ class Interreflection:
         def complete(values):
             return cs.plan.complete(cs.gather_ids, values, self.V)  # T-15 from the indirect cut's vertices
 
-        total, spec, energies = self._passes(light, visible, cs.gather_ids, complete)
-        self._remember(light, energies)
-        nodes, ids, node_dark = cs.refine(active, dark, full == LIT, total, spec)
+        if cs.levels is None:
+            total, spec, energies = self._passes(light, visible, cs.gather_ids, complete)
+            self._remember(light, energies)
+            anc = None
+        else:
+            total, spec, energies, anc, counts = self._passes_refined(light, visible)
+            self._remember(light, energies, counts)
+        nodes, ids, node_dark = cs.refine(active, dark, full == LIT, total, spec, anc)
         k = len(ids)
         basis = wp.zeros((k, b.sh_order * b.sh_order), dtype=wp.float32, device=b.device)
         coeffs = wp.zeros((k, b.channels, b.ncoef), dtype=wp.float32, device=b.device)
@@ -279,7 +350,7 @@ class CutState:
         hk = node_heights(h)
         order = np.argsort(hk, kind="stable")
         bounds = np.searchsorted(hk[order], np.arange(1, hk.max(initial=0) + 2))
-        self.levels = [order[a:c] for a, c in zip(bounds[:-1], bounds[1:]) if c > a]
+        self.height_levels = [order[a:c] for a, c in zip(bounds[:-1], bounds[1:]) if c > a]
         internal = np.arange(V, N)
         offs = h.neighbour_offsets
         counts = (offs[internal + 1] - offs[internal]).astype(np.int64)
@@ -287,8 +358,15 @@ class CutState:
         self.ring_nb = h.neighbours[offs[V] : offs[N]].astype(np.int64)
         self.ring_u = np.repeat(h.vertex[h.children[internal, 1]].astype(np.int64), counts)
         self.referenced = gi.referenced
+        if gi.settings.indirect_tolerance is not None:  # G-9: the cut is chosen per sample and pass
+            from lodprt.precompute.indirect_cut import IndirectLevels
+
+            self.levels = IndirectLevels(h, self.referenced)
+            self.indirect_nodes = self.indirect_anc = self.gather_ids = None
+            return
+        self.levels = None
         inverse = self._inverse_distances(gi)
-        self.indirect_nodes = indirect_cut(h, inverse, gi.settings.indirect_threshold_deg, self.levels)
+        self.indirect_nodes = indirect_cut(h, inverse, gi.settings.indirect_threshold_deg, self.height_levels)
         mask = np.zeros(N, bool)
         mask[self.indirect_nodes] = True
         self.indirect_anc = active_ancestors(h, mask)
@@ -328,16 +406,19 @@ class CutState:
         bad = np.bincount(self.ring_row, weights=mixed, minlength=N - V) > 0
         good = np.ones(N, bool)
         good[V:] = ~bad
-        for nodes in self.levels:
+        for nodes in self.height_levels:
             c0, c1 = h.children[nodes, 0], h.children[nodes, 1]
             good[nodes] &= good[c0] & good[c1]
         return good & ~np.where(h.parent >= 0, good[np.maximum(h.parent, 0)], False)
 
-    def refine(self, active, dark, lit, total, spec):
-        """The stored cut (G-6, G-7): (nodes (K,) int32, vertex ids (K,) int32 ascending, dark (K,) uint8)."""
+    def refine(self, active, dark, lit, total, spec, indirect_anc=None):
+        """The stored cut (G-6, G-7): (nodes (K,) int32, vertex ids (K,) int32 ascending, dark (K,) uint8);
+        ``indirect_anc`` (V,) the sample's own indirect front (G-9) in place of the bake's (G-5)."""
         h = self.h
         anc = np.minimum(active_ancestors(h, active), active_ancestors(h, self.pure_front(lit)))
-        anc = np.minimum(anc, self.indirect_anc)  # the deepest of the three fronts: ids grow toward the roots
+        indirect = self.indirect_anc if indirect_anc is None else indirect_anc
+        if indirect is not None:
+            anc = np.minimum(anc, indirect)  # the deepest of the three fronts: ids grow toward the roots
         nodes = np.unique(anc)
         verts = h.vertex[nodes]
         keep = self.referenced[verts]
@@ -374,7 +455,7 @@ def indirect_cut(h, inverse: np.ndarray, threshold_deg: float | None, levels) ->
 def gi_attributes(settings, samples: list[dict]) -> dict:
     """Root attributes of a store baked with bounces: the settings, each sample's pass energies (from the
     statistics its group records) and the vertices the indirect cut gathers at."""
-    gather = next((s["indirect_gather_vertices"] for s in samples if s.get("indirect_gather_vertices") is not None),
-                  None)
+    counts = [s["indirect_gather_vertices"] for s in samples if s.get("indirect_gather_vertices") is not None]
+    gather = int(round(float(np.mean(counts)))) if counts else None  # G-9 varies by sample; G-5 does not
     return {**settings.attributes(), "bounce_energy": [list(s.get("bounce_energy", [])) for s in samples],
             "indirect_gather_vertices": gather}
