@@ -1,6 +1,7 @@
 """Interreflection in the point-light bake: LOD GI bake against the full-resolution GI bake, and against Mitsuba 3.
 
     python benchmarks/gi.py [--quick] [--mitsuba] [--json PATH] [--device cpu|cuda]
+    python benchmarks/gi.py --floors [--quick] [--tolerances 0.01 0.02 1]
 
 Scene: the Stanford bunny on a floor, both diffuse white (kd 0.8, ks 0). For each bounce count 0..3 and
 gathering ray count, in the same run: the full-resolution GI bake and the LOD GI bake (light cut --threshold-deg
@@ -9,6 +10,12 @@ per-vertex radiance against a converged reference (full resolution, many rays, t
 each other. ``--mitsuba`` also renders one light sample with lodprt's renderer and with Mitsuba 3's ``path``
 integrator (same geometry, point light, camera; ``pip install 'lodprt[reference]'``) and reports PSNR and the mean
 radiance inside the direct shadows. Writes benchmarks/results/gi[-quick].json, .png and gi-mitsuba[-quick].png.
+
+``--floors`` instead: the bunny on floors of 60, 200 and 400 quads a side, 2 bounces, default rays (64), 2 x 1 x 2
+lights; per floor, in the same run, the full-resolution GI bake, the LOD bake with the geometric indirect cut (G-5,
+--indirect-threshold-deg) and with the error-driven one (G-9) at each of ``--tolerances``: bake time, its ratio to
+the full bake's, gathering vertices per pass and the rel-RMSE of the completed radiance against the full bake (all
+vertices, the bunny's, the floor's). Writes benchmarks/results/gi-floors[-quick].json.
 """
 
 from __future__ import annotations
@@ -90,6 +97,62 @@ def sweep(scene, tree, args, tmp: Path) -> list[dict]:
             print(f"  bounces {b} rays {rays}: full {r['full_s']:.2f} s, LOD {r['lod_s']:.2f} s ({r['ratio']:.3f}), "
                   f"errors {r['full_err']:.4f} / {r['lod_err']:.4f}, LOD vs full {r['lod_vs_full']:.4f}", flush=True)
     return rows
+
+
+def floor_sweep(args) -> list[dict]:
+    """Full vs LOD GI bakes (G-5 and G-9) on growing floors, 2 bounces, default rays (module docstring)."""
+    import zarr
+
+    from lodprt.model.hierarchy_build import build_hierarchy
+    from lodprt.precompute.bake import bake
+
+    rows = []
+    for floor in args.floors:
+        scene = gi_scene(floor, (1, 1, 1) if args.quick else (2, 1, 2))
+        tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
+        bunny = scene.object_id[scene.referenced] == 0
+        tmp = Path(tempfile.mkdtemp(prefix="lodprt-gi-floor-"))
+        try:
+            common = dict(sh_order=2, device=args.device, tree=tree, bounces=2, overwrite=True)
+            full = bake(scene, tmp / "full.zarr", threshold_deg=None, **common)
+            cf = completed(tmp / "full.zarr", scene.referenced)
+            cuts = [("G-5", {"indirect_threshold_deg": args.indirect_threshold_deg}, args.indirect_threshold_deg)]
+            cuts += [("G-9", {"indirect_tolerance": t}, t) for t in args.tolerances]
+            for cut, kw, value in cuts:
+                lod = bake(scene, tmp / "lod.zarr", threshold_deg=args.threshold_deg, **common, **kw)
+                cl = completed(tmp / "lod.zarr", scene.referenced)
+                norm = float(np.mean(cf**2))
+                part = lambda m: float(np.sqrt(np.mean((cl[:, m] - cf[:, m]) ** 2) * m.mean() / norm))  # noqa: E731
+                rows.append({"floor": floor, "vertices": int(scene.referenced.sum()), "cut": cut, "setting": value,
+                             "full_s": full.bake_seconds, "lod_s": lod.bake_seconds,
+                             "ratio": lod.bake_seconds / full.bake_seconds,
+                             "gathered": zarr.open_group(str(tmp / "lod.zarr"), mode="r").attrs.get(
+                                 "indirect_gather_vertices"),
+                             "lod_vs_full": rel_rmse(cl, cf), "bunny_part": part(bunny), "floor_part": part(~bunny)})
+                r = rows[-1]
+                print(f"  floor {floor} ({r['vertices']:,} vertices) {cut} {value}: full {r['full_s']:.2f} s, LOD "
+                      f"{r['lod_s']:.2f} s ({r['ratio']:.3f}), {r['gathered']:,} gathered, LOD vs full "
+                      f"{r['lod_vs_full']:.4f} (bunny {r['bunny_part']:.4f}, floor {r['floor_part']:.4f})", flush=True)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return rows
+
+
+def floors_main(args) -> None:
+    args.floors = [20, 40] if args.quick else [60, 200, 400]
+    rows = floor_sweep(args)
+    print(table(rows, [("floor", "floor", "d"), ("vertices", "vertices", ",d"), ("cut", "cut", "s"),
+                       ("setting", "setting", "g"), ("full_s", "full s", ".2f"), ("lod_s", "LOD s", ".2f"),
+                       ("ratio", "LOD/full", ".3f"), ("gathered", "gathered", ",d"),
+                       ("lod_vs_full", "LOD vs full", ".4f"), ("bunny_part", "bunny", ".4f"),
+                       ("floor_part", "floor", ".4f")]))
+    name = "gi-floors" + ("-quick" if args.quick else "")
+    results = {"benchmark": "gi", "quick": args.quick, "environment": environment(args.device),
+               "settings": {"bounces": 2, "gi_rays": 64, "threshold_deg": args.threshold_deg,
+                            "indirect_threshold_deg": args.indirect_threshold_deg, "tolerances": args.tolerances,
+                            "lights": "1 x 1 x 1" if args.quick else "2 x 1 x 2", "kd": KD},
+               "rows": rows}
+    print("wrote", write(name, results, args.json))
 
 
 # -- Mitsuba 3 --------------------------------------------------------------------------------------------------
@@ -205,11 +268,19 @@ def main():
     p.add_argument("--threshold-deg", type=float, default=0.0, help="light cut of the LOD bakes (default 0: the direct "
                    "term costs one shadow ray per vertex; the LOD saves on the indirect passes)")
     p.add_argument("--indirect-threshold-deg", type=float, default=20.0, help="indirect cut (default 20)")
+    p.add_argument("--floors", action="store_true", help="only the floor sweep: full vs LOD (G-5 and G-9) on floors "
+                   "of 60, 200 and 400, 2 bounces, default rays (gi-floors.json)")
+    p.add_argument("--tolerances", type=float, nargs="+", default=[0.01, 0.015, 0.02, 1.0],
+                   help="G-9 tolerances of the floor sweep (default 0.01 0.015 0.02 1; 1 is the coarsest cut: the "
+                   "cost of everything but the gathering)")
     args = p.parse_args()
     from lodprt.devices import resolve_device
     from lodprt.model.hierarchy_build import build_hierarchy
 
     args.device = resolve_device(args.device)
+    if args.floors:
+        floors_main(args)
+        return
     q = args.quick
     args.bounces = [0, 1, 2, 3]
     args.rays = [16] if q else [32, 128]

@@ -222,6 +222,14 @@ def gi(r: dict) -> str:
                "LOD vs full"], rows)
 
 
+def gi_floors(r: dict) -> str:
+    rows = [[n(row["floor"]), n(row["vertices"]), row["cut"], g(row["setting"]), g(row["full_s"]), g(row["lod_s"]),
+             g(row["ratio"]), n(row["gathered"]), e4(row["lod_vs_full"]), e4(row["bunny_part"]), e4(row["floor_part"])]
+            for row in r["rows"]]
+    return md(["floor", "vertices", "cut", "setting", "full s", "LOD s", "LOD / full", "gathered per pass",
+               "LOD vs full", "bunny part", "floor part"], rows)
+
+
 def gi_mitsuba(r: dict) -> str:
     m = r["mitsuba"]
     names = {"direct": "direct only", "gi_full": "2 bounces, 128 rays, full resolution",
@@ -335,6 +343,7 @@ TABLES = {
     "bake_memory_white": ("bake_memory", bake_memory_white),
     "gi": ("gi", gi),
     "gi_mitsuba": ("gi", gi_mitsuba),
+    "gi_floors": ("gi-floors", gi_floors),
     "volume": ("volume", volume),
     "neighbourhood": ("neighbourhood", neighbourhood),
     "environment_transfer": ("environment", environment_transfer),

@@ -94,12 +94,15 @@ class GISettings:
                               "the indirect radiance, G-9) or None for the geometric indirect cut (G-5)")
 
     def attributes(self) -> dict:
-        """The store's root attributes of these settings (docs/FORMAT.md)."""
-        return {"bounces": int(self.bounces), "bounce_threshold": float(self.threshold), "gi_rays": int(self.rays),
-                "gi_directions": "cosine-spherical-fibonacci", "gi_seed": int(self.seed),
-                "indirect_threshold_deg": None if self.indirect_threshold_deg is None
-                else float(self.indirect_threshold_deg),
-                "indirect_tolerance": None if self.indirect_tolerance is None else float(self.indirect_tolerance)}
+        """The store's root attributes of these settings (docs/FORMAT.md); ``indirect_tolerance`` only when set
+        (G-9), so stores of the geometric cut keep the attributes they had (and resume as before)."""
+        out = {"bounces": int(self.bounces), "bounce_threshold": float(self.threshold), "gi_rays": int(self.rays),
+               "gi_directions": "cosine-spherical-fibonacci", "gi_seed": int(self.seed),
+               "indirect_threshold_deg": None if self.indirect_threshold_deg is None
+               else float(self.indirect_threshold_deg)}
+        if self.indirect_tolerance is not None:
+            out["indirect_tolerance"] = float(self.indirect_tolerance)
+        return out
 
 
 class Interreflection:
