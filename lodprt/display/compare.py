@@ -59,8 +59,11 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
               ERROR_LABEL]
     if cut_criterion is None:  # a store without a hierarchy: no view cut, both panels are full resolution
         what = "no hierarchy (full resolution both)"
-    else:
-        what = cut_criterion.describe()
+    else:  # the bound the frame was cut at (under a target, where the steering settled: E-4) and the target
+        what = cut_criterion.with_bound(float(getattr(source, "error_bound", cut_criterion.error_bound))).describe()
+        target, est = getattr(source, "target_psnr", None), lod.stats.get("estimated_psnr_db")
+        if target is not None:
+            what += f", steered to {target:g} dB" + ("" if est is None else f" (estimated {est:.1f} dB)")
     panel_figure(out, panels, titles, vmax,
                  f"{what}: PSNR {numbers['psnr_db']:.1f} dB (clipped at white), relative RMSE "
                  f"{numbers['relative_rmse']:.4f}, mean {numbers['mean_difference']:.4f}\n"
