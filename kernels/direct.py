@@ -97,6 +97,7 @@ def direct_light(
     out_coeffs: wp.array3d(dtype=wp.float32),  # In/Out: (A, 3, ncoef) the residual's coefficients; D V added
     radiance: wp.array2d(dtype=wp.float32),  # In/Out: (A, 3) radiance toward the eye; D V toward it added
     rays: wp.array(dtype=wp.int32),  # Out: (A,) shadow rays cast for the row (all lights)
+    lit: wp.array(dtype=wp.int32),  # Out: (A,) bit li set when light li (< 31) reaches the vertex (V > 1/2, M-6)
 ):
     k = wp.tid() + offset
     v = vid[k]
@@ -112,6 +113,7 @@ def direct_light(
             dv = n
         sh_basis_fast(dv, bands_of(ncoef), eye_basis, k)
     cast = int(0)
+    mask = int(0)
     for li in range(lights.shape[0]):
         x = lights[li]
         to_light = x - p
@@ -120,6 +122,8 @@ def direct_light(
         vis, r_cast = light_visibility(mesh, p, n, x, ray_offset, v, li, light_slots, light_weights, sample_vis,
                                        mode)
         cast += r_cast
+        if vis > 0.5 and li < 31:
+            mask = mask | (1 << li)
         if vis <= 0.0:
             continue
         l, e = incident(p, n, x, falloff, radius)
@@ -147,3 +151,4 @@ def direct_light(
                     if with_radiance == 1:
                         radiance[k, c] += col[c] * val * eye_basis[k, i]
     rays[k] = cast
+    lit[k] = mask

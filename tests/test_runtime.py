@@ -216,6 +216,8 @@ def test_incremental_reaches_a_converged_cut(store):
     par = np.unique(h.parent[act])
     cand = par[(par >= 0) & cut.active[h.children[np.maximum(par, 0), 0]] & cut.active[h.children[np.maximum(par, 0), 1]]]
     culled, err = inc.node_errors(cand)[:2]
+    if inc.refinement.extra is not None:  # M-6: a collapse across the actual light's shadow edge is not allowed
+        err = np.maximum(err, inc.refinement.extra[cand])
     loose = culled | (err * HYSTERESIS <= inc.error_bound)  # collapses the bound allows (with the hysteresis)
     assert all(len(cut.blockers_of_coarsen(int(k))) for k in cand[loose])
     fresh = Runtime(store, error_bound=0.1)

@@ -80,6 +80,7 @@ class DirectLight:
         # direct term does not have: R_j = 0 there (the samples' visibility may still decide V, M-3 and M-4)
         self.residual = int(store.attrs.get("bounces", 0) or 0) > 0
         self.uses_visibility = self.mode != kdirect.RAYS
+        self.lit = np.zeros(0, np.int32)  # the last ``add``'s rows: bit li where light li reaches them (M-6)
 
     # -- per sample (M-2) ----------------------------------------------------------------------------------------
     def _at_sample(self, sample: int, with_direct: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -139,17 +140,20 @@ class DirectLight:
         columns of ``sample_vis`` (V, S) uint8 (Warp array) holding each light's samples, ``light_weights`` (L, K)
         their weights; ``eye_basis`` (A, >= ncoef), when given, already holds the SH basis toward the eye per row
         (``kernels.runtime.relight``'s scratch). ``threads``: a callable ``(kernel, rows, inputs, outputs)`` that launches split over rows
-        with the first row as the kernel's offset (default: one launch). Returns the shadow rays cast."""
+        with the first row as the kernel's offset (default: one launch). Returns the shadow rays cast; ``lit``
+        then holds (A,) int32, bit ``li`` set where light ``li`` (< 31) reaches the row (M-6)."""
         from lodprt.kernels import direct as kdirect
 
         wp, dev = self.wp, self.device
         A = len(vid)
+        self.lit = np.zeros(A, np.int32)
         if A == 0 or len(lights) == 0:
             return 0
         ncoef = coeffs.shape[2]
         with_rad = radiance is not None
         rad = radiance if with_rad else wp.zeros((1, 3), dtype=wp.float32, device=dev)
         rays = wp.zeros(A, dtype=wp.int32, device=dev)
+        lit = wp.zeros(A, dtype=wp.int32, device=dev)
         e = np.zeros(3) if eye is None else np.asarray(eye, np.float64)
         inputs = [
             wp.array(np.asarray(vid, np.int32), dtype=wp.int32, device=dev), self.points, self.normals,
@@ -162,10 +166,11 @@ class DirectLight:
             wp.empty((A, ncoef), dtype=wp.float32, device=dev),
             eye_basis if eye_basis is not None else wp.empty((A, ncoef), dtype=wp.float32, device=dev),
         ]
-        outputs = [coeffs, rad, rays]
+        outputs = [coeffs, rad, rays, lit]
         if threads is None:
             wp.launch(kdirect.direct_light, dim=A, inputs=[0] + inputs, outputs=outputs, device=dev)
         else:
             threads(kdirect.direct_light, A, inputs, outputs)
+        self.lit = lit.numpy()  # M-6: which lights reach each row (bit per light), for the view cut's shadow edges
         return int(rays.numpy().sum())
 

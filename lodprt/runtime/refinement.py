@@ -66,6 +66,8 @@ class CutRefinement:
         self.retry_at = np.zeros(h.num_nodes, np.int64)
         self.converged_once = False
         self.dirty, self.settled = True, False  # something changed since the cut settled; it has settled
+        #: (N,) errors that add to the criterion's this frame (M-6: the actual light's shadow edges), or None
+        self.extra: np.ndarray | None = None
 
     def reset(self, cut) -> None:
         """Start again from ``cut`` (LOD switched): the first frame converges in full."""
@@ -93,6 +95,8 @@ class CutRefinement:
         if not len(nodes):
             return 0, 0, 0
         culled, err = errors.lookup(nodes, bound, evaluate, self.converged_once)
+        if self.extra is not None:  # M-6: a node at the actual light's shadow edge refines, its parent stays split
+            err = np.maximum(err, self.extra[nodes])
         k, frame = len(rc), errors.frame
         want_refine = ~culled[:k] & (err[:k] > bound)
         want_coarsen = culled[k:] | (err[k:] * HYSTERESIS <= bound)

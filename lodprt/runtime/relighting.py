@@ -118,6 +118,12 @@ class Relighting:
                                     self.visibility_array(), coeffs, eye=eye, radiance=radiance, eye_basis=eye_basis,
                                     threads=launch)
 
+    def lit_rows(self, count: int) -> np.ndarray | None:
+        """(count,) int32: which lights reached each vertex of the last relight (bit per light, M-6), or None
+        without a direct term (T-12) or when the last relight had another number of rows."""
+        lit = None if self.direct is None else self.direct.lit
+        return lit if lit is not None and len(lit) == count else None
+
     def relight_vertices(self, vid: np.ndarray, eye, arrays: dict, frame_inputs, launch) -> tuple[np.ndarray,
                                                                                                   np.ndarray]:
         """(A, 3, ncoef) interpolated coefficients and (A, 3) radiance toward ``eye`` of vertices ``vid`` under the

@@ -36,6 +36,7 @@ from lodprt.runtime.refinement import HYSTERESIS, CutRefinement, ErrorCache
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
 from lodprt.runtime.samples import default_white
+from lodprt.runtime.shadow_edges import area_weight, shadow_edge_errors, sphere_pixels, straddling_steps
 from lodprt.runtime.triangulation import IncrementalTriangulation
 from lodprt.runtime.view_cut import Cut
 
@@ -47,6 +48,9 @@ JUMP = 0.1
 LIGHT_JUMP = 0.4
 #: E-4: steering rounds of the first frame with a target_psnr (each converges the cut for the new bound)
 FIRST_ROUNDS = 12
+#: M-6: rounds of the first frame that refine along the actual light's shadow edges (each relights the cut and
+#: splits the nodes whose triangles straddle an edge by more than the bound)
+EDGE_ROUNDS = 24
 #: E-4: frames between two estimates of the frame's error while the steering searches (twice as many once it
 #: has settled)
 ESTIMATE_FRAMES = 4
@@ -452,6 +456,19 @@ class Runtime:
         steer = time.perf_counter() - t2  # the estimate and steering count as cut work
         coef, rad = self._relight(vid)
         t3 = time.perf_counter()
+        if self._shadow_edges(vid, tri, rad) and settle:  # M-6: the first frame follows the light's shadow edges
+            for _ in range(EDGE_ROUNDS):
+                more = self._converge(10_000)
+                refined, coarsened, touched, passes = (a + b for a, b in zip((refined, coarsened, touched, passes),
+                                                                             more))
+                if more[0] == 0:
+                    break
+                vid, tri = self._cut_mesh()
+                coef, rad = self._relight(vid)
+                if not self._shadow_edges(vid, tri, rad):
+                    break
+            steer += time.perf_counter() - t3  # cut work too
+            t3 = time.perf_counter()
         if self.triangle_budget is not None:  # steer the bound toward the budget
             new = frame_error.toward_budget(self.error_bound, len(tri), self.triangle_budget)
             self.error_bound, self.refinement.dirty = new, self.refinement.dirty or new != self.error_bound
@@ -477,6 +494,33 @@ class Runtime:
                      normals=np.take(self._nrm32, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
+
+    def _shadow_edges(self, vid: np.ndarray, tri: np.ndarray, rad: np.ndarray) -> bool:
+        """M-6 from the relight of ``vid``: the errors of the nodes whose cut triangles straddle the actual lights'
+        shadow edges, for the next refinement passes (``CutRefinement.extra``; screen criterion, direct path, LOD
+        on). Returns whether one of them is over the bound (the cut must move)."""
+        lit = self.lighting.lit_rows(len(vid))
+        ref = self.refinement
+        if lit is None or not self.lod or self.criterion.name != "screen":
+            ref.extra = None
+            return False
+        step = straddling_steps(tri, lit, rad, self.white)
+        cam = self.camera
+        area_ref = self.criterion.area_ref(cam.width, cam.height)
+        focal = self.focal_px()
+
+        def weight(nodes):
+            return area_weight(sphere_pixels(self.node_pos[nodes], self.radius[nodes], self.vp, focal), area_ref)
+
+        nodes, err = shadow_edge_errors(self.h, self.cut.anc, vid, step, weight)
+        if ref.extra is None or len(ref.extra) != self.h.num_nodes:
+            ref.extra = np.zeros(self.h.num_nodes)
+        else:
+            ref.extra[:] = 0.0
+        ref.extra[nodes] = err
+        over = bool((err > self.error_bound).any())
+        ref.dirty = ref.dirty or over
+        return over
 
     def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, 3, ncoef) coefficients and (A, 3) radiance toward the eye of vertices ``vid``

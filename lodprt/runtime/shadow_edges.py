@@ -1,0 +1,78 @@
+"""The actual light's shadow edges in the view cut (M-6; docs/RUNTIME.md "Lights anywhere"): the per-node bounds
+S-2 are made from the light samples, whose shadows lie elsewhere than the actual light's when a light sits between
+them (a thin occluder's shadow moves farther than a node between two samples, and no sample marks the nodes the
+actual shadow edge crosses). The direct path (M-3) already casts a shadow ray from every drawn vertex toward every
+light, so the frame knows where the cut's own triangles straddle the actual light's shadow edges:
+
+    M-6   e_shadow(n) = c(A_n) max over the cut triangles at n's vertex whose vertices disagree in which lights
+          reach them of max_c |L_a - L_b| / white          (L the drawn radiance of the triangle's vertices a, b)
+
+with ``c(A)`` S-1's area weight (1 up to ``A_ref`` pixels, ``sqrt(A / A_ref)`` above, ``A`` the pixels of the
+node's projected bounding sphere, as ``kernels.runtime.view_errors`` weighs S-2). The run time takes ``max(S-1, e_shadow)`` for the active node of each such
+vertex (a refine candidate) and for its parent (a coarsen candidate: the collapse that would merge the two sides),
+so the cut refines along the actual edge until the step each triangle straddles weighs at most the bound, over the
+frames that follow (each frame's relight tells the next where the edge is).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def area_weight(pixels: np.ndarray, area_ref: float) -> np.ndarray:
+    """S-1's ``c(A)``: 1 up to ``area_ref`` pixels (a node in view decides at least one pixel), ``sqrt(A /
+    area_ref)`` above."""
+    a = np.asarray(pixels, np.float64)
+    return np.where(a > area_ref, np.sqrt(a / max(area_ref, 1e-30)), 1.0)
+
+
+def sphere_pixels(centres: np.ndarray, radii: np.ndarray, vp: np.ndarray, focal_px: float) -> np.ndarray:
+    """The pixels ``pi r_px^2`` of bounding spheres on screen, ``r_px = r f / depth`` (1e18 when the eye is inside
+    one or it lies behind the eye), as ``kernels.runtime.view_errors`` measures a node's footprint."""
+    p = np.asarray(centres, np.float64)
+    depth = np.c_[p, np.ones(len(p))] @ np.asarray(vp, np.float64)[3]
+    r = np.asarray(radii, np.float64)
+    fp = np.where(depth > r, np.minimum(r * focal_px / np.maximum(depth, 1e-30), 1e9), 1e9)
+    return np.pi * fp * fp
+
+
+def straddling_steps(tri: np.ndarray, lit: np.ndarray, radiance: np.ndarray, white: float) -> np.ndarray:
+    """M-6's step at each drawn vertex (A,): the largest ``max_c |L_a - L_b| / white`` over the triangles of
+    ``tri`` (T, 3, indices into the A drawn vertices) at that vertex whose vertices disagree in ``lit`` (A,) (which
+    lights reach them); 0 where no such triangle meets the vertex."""
+    A = len(lit)
+    step = np.zeros(A)
+    if not len(tri) or not A:
+        return step
+    t = np.asarray(tri, np.int64)
+    m = np.asarray(lit)[t]
+    cross = (m[:, 0] != m[:, 1]) | (m[:, 0] != m[:, 2])
+    if not cross.any():
+        return step
+    t = t[cross]
+    r = np.asarray(radiance, np.float64)[t] / max(float(white), 1e-30)  # (T', 3 vertices, 3 channels)
+    d = np.maximum.reduce([np.abs(r[:, 0] - r[:, 1]), np.abs(r[:, 1] - r[:, 2]), np.abs(r[:, 2] - r[:, 0])]).max(1)
+    np.maximum.at(step, t.ravel(), np.repeat(d, 3))
+    return step
+
+
+def shadow_edge_errors(h, anc: np.ndarray, vid: np.ndarray, step: np.ndarray, pixels) -> tuple[np.ndarray,
+                                                                                              np.ndarray]:
+    """M-6 per node: (nodes (K,) int64, e_shadow (K,) float64) for the internal active nodes of the drawn vertices
+    ``vid`` (A,) with a positive ``step`` (A,) and their parents, ``anc`` the cut's active ancestor of every leaf
+    and ``pixels(nodes) -> (K,)`` S-1's weight ``c(A)`` of each node. A parent takes its children's largest step."""
+    V = h.num_vertices
+    hit = step > 0
+    if not hit.any():
+        return np.zeros(0, np.int64), np.zeros(0)
+    node = np.asarray(anc, np.int64)[np.asarray(vid, np.int64)[hit]]
+    s = step[hit]
+    par = h.parent[node]
+    keys = np.concatenate([node[node >= V], par[par >= 0]])
+    vals = np.concatenate([s[node >= V], s[par >= 0]])
+    if not len(keys):
+        return np.zeros(0, np.int64), np.zeros(0)
+    nodes, inv = np.unique(keys, return_inverse=True)
+    best = np.zeros(len(nodes))
+    np.maximum.at(best, inv, vals)
+    return nodes, best * pixels(nodes)
