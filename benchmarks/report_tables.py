@@ -68,7 +68,7 @@ def static_table(r: dict, family: str, label) -> str:
     criterion at a fixed 0.8 and T-14 (x fewer, PSNR)."""
     views = {}
     for v in r["static_views"]:
-        if v.get("family", "shared") == family:
+        if v.get("family", "shared") == family and v.get("light", "sample") == "sample":
             views.setdefault((v["scene"], v["view"]), {})[v.get("setting", v["criterion"].split()[0])] = v
     rows = []
     for (scene, view), by in views.items():
@@ -97,6 +97,17 @@ def view_cut_procedural(r: dict) -> str:
     if not any(v.get("family") == "procedural" for v in r["static_views"]):
         return NOT_MEASURED
     return static_table(r, "procedural", str)
+
+
+def view_cut_between(r: dict) -> str:
+    """The default's static views with the light between samples (every scene, both families)."""
+    rows = [[_scene_label(v["scene"], r["floor"]) if v.get("family", "shared") == "shared" else v["scene"],
+             v["view"], v["light"], f"{n(v['triangles'])} / {n(v['full'])}", g(v["fewer"], 2),
+             f"{v['psnr_db']:.1f} dB", f"{v['estimated_psnr_db']:.1f} dB"]
+            for v in r["static_views"] if v.get("light", "sample") != "sample"]
+    if not rows:
+        return NOT_MEASURED
+    return md(["scene", "view", "light", "default: triangles / full", "x fewer", "PSNR", "estimated (E-3)"], rows)
 
 
 def view_cut_summary(r: dict) -> str:
@@ -329,6 +340,7 @@ TABLES = {
     "view_cut_static": ("view_cut", view_cut_static),
     "view_cut_procedural": ("view_cut", view_cut_procedural),
     "view_cut_summary": ("view_cut", view_cut_summary),
+    "view_cut_between": ("view_cut", view_cut_between),
     "view_cut": ("view_cut", view_cut),
     "runtime": ("runtime", runtime),
     "runtime_sweep": ("runtime", runtime_sweep),

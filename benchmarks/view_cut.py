@@ -12,8 +12,9 @@ drawn by ``lodprt.render.Renderer`` against the full-mesh frame of the same came
 (``lodprt.display.compare.error_against_full``: PSNR clipped at white, relative RMSE). Baseline in the same run: the full mesh
 relit along the same orbit (LOD off). Writes ``benchmarks/results/view_cut.json`` and ``view_cut.png`` (error
 against time, one panel per scene). Also, per scene, both criteria at their defaults and the screen criterion
-steered to a target PSNR, from two fixed views with the cut converged (``static_views``: triangles against the full
-mesh, PSNR, and the target's estimated PSNR E-3 beside the measured one).
+steered to a target PSNR, from three fixed views with the cut converged, the light on the middle sample
+(``static_views``: triangles against the full mesh, PSNR, and the target's estimated PSNR E-3 beside the measured
+one); the default also with the light halfway between two samples and at the centre of four (``between_lights``).
 
 ``--scenes procedural`` (or ``all``, the default of the full run) also measures the static views on the procedural
 and decimated scenes of ``benchmarks/procedural.py`` (thin fins, fine relief, a crowd of sizes, terrain, a speck on
@@ -69,11 +70,12 @@ def bake_procedural(name: str, folder: Path, device: str) -> Path:
 
 
 def static_summary(static: list[dict]) -> list[dict]:
-    """Per setting (STATIC_SETTINGS), the worst PSNR and the least "x fewer" over every static row,
-    with the scene and view where each occurs."""
+    """Per setting (STATIC_SETTINGS) and, for the default, per light between samples, the worst PSNR and the least
+    "x fewer" over every static row, with the scene and view where each occurs."""
     out = []
-    for criterion in dict.fromkeys(r["setting"] for r in static):
-        mine = [r for r in static if r["setting"] == criterion]
+    label = lambda r: r["setting"] + ("" if r.get("light", "sample") == "sample" else f", light {r['light']}")  # noqa: E731
+    for criterion in dict.fromkeys(label(r) for r in static):
+        mine = [r for r in static if label(r) == criterion]
         worst = min(mine, key=lambda r: r["psnr_db"])
         least = min(mine, key=lambda r: r["fewer"])
         out.append({"criterion": criterion, "rows": len(mine), "worst_psnr_db": worst["psnr_db"],
@@ -107,15 +109,30 @@ def run_orbit(store, rt, frames: int, every: int, renderer) -> dict:
     return out
 
 
+def between_lights(store) -> dict:
+    """The static views' lights: the middle sample, halfway to the next sample along x ("between 2") and the centre
+    of the cell of four samples there ("between 4"; on a 3 x 1 x 3 grid, samples 4, 5, 7 and 8)."""
+    p = store.light_positions
+    mid = store.num_samples // 2
+    out = {"sample": p[mid]}
+    row = np.flatnonzero((np.abs(p[:, 1:] - p[mid, 1:]).max(1) < 1e-9) & (p[:, 0] > p[mid, 0] + 1e-9))
+    col = np.flatnonzero((np.abs(p[:, :2] - p[mid, :2]).max(1) < 1e-9) & (p[:, 2] > p[mid, 2] + 1e-9))
+    if len(row):
+        x = row[np.argmin(p[row, 0])]
+        out["between 2"] = 0.5 * (p[mid] + p[x])
+        if len(col):
+            z = col[np.argmin(p[col, 2])]
+            out["between 4"] = 0.5 * (p[x] + p[z])
+    return out
+
+
 def static_views(store, name: str, renderer, device: str, family: str = "shared") -> list[dict]:
     """Each of STATIC_SETTINGS, cut converged, light on the middle sample, 400 x 300, from the default eye of
     ``lodprt compare`` (``default_eye``: a three-quarter view from the front and above), a front view of the object
-    and a close one (the full frame made once per view): triangles against the full mesh, PSNR and, for the
-    default's rows, the estimated PSNR (E-3: how tight the estimate is, and whether it is ever optimistic)."""
-    from lodprt.display.compare import frame_error
+    and a close one (the full frame made once per view and light): triangles against the full mesh, PSNR and, for
+    the default's rows, the estimated PSNR (E-3: how tight the estimate is, and whether it is ever optimistic). The
+    default also with the light between samples (``between_lights``: the direct path, M-1..M-6)."""
     from lodprt.runtime.camera import Camera, default_eye, object_bounds, scene_centre
-    from lodprt.runtime.frames import full_frame
-    from lodprt.runtime.session import Runtime
 
     b = object_bounds(store)
     c, size = 0.5 * (b[0] + b[1]), float(np.linalg.norm(b[1] - b[0]))
@@ -123,10 +140,22 @@ def static_views(store, name: str, renderer, device: str, family: str = "shared"
     views = {"default eye": Camera(eye=default_eye(store), target=scene_centre(store), width=400, height=300),
              "front": Camera(**at([0.25, 0.55, 1.1]), width=400, height=300),
              "close": Camera(**at([0.15, 0.3, 0.6]), width=400, height=300)}
-    light = store.light_positions[store.num_samples // 2][None]
+    out = []
+    for light_name, light in between_lights(store).items():
+        settings = STATIC_SETTINGS if light_name == "sample" else {"default": STATIC_SETTINGS["default"]}
+        out += light_views(store, name, renderer, device, family, views, light_name, light[None], settings)
+    return out
+
+
+def light_views(store, name, renderer, device, family, views, light_name, light, settings) -> list[dict]:
+    """``static_views``' rows for one light: each of ``settings`` from each of ``views``."""
+    from lodprt.display.compare import frame_error
+    from lodprt.runtime.frames import full_frame
+    from lodprt.runtime.session import Runtime
+
     fulls = {view: full_frame(store, cam, lights=light) for view, cam in views.items()}
     out = []
-    for setting, kwargs in STATIC_SETTINGS.items():
+    for setting, kwargs in settings.items():
         rt = Runtime(store, device=device, **kwargs)
         rt.set_lights(light)
         for view, cam in views.items():
@@ -143,13 +172,14 @@ def static_views(store, name: str, renderer, device: str, family: str = "shared"
             numbers = frame_error(renderer, lod, full, rt.white)[0]
             est = rt.estimated_psnr  # E-3 of this frame, made only under a target_psnr
             label = rt.criterion.name + (f", target {rt.target_psnr:g} dB" if rt.target_psnr else "")
-            out.append({"scene": name, "family": family, "view": view, "setting": setting,
+            out.append({"scene": name, "family": family, "view": view, "setting": setting, "light": light_name,
                         "criterion": f"{setting}: {label} (bound {rt.error_bound:.3g})",
                         "triangles": len(lod.triangles), "full": len(full.triangles),
                         "fewer": len(full.triangles) / max(len(lod.triangles), 1), "psnr_db": numbers["psnr_db"],
                         "estimated_psnr_db": float("nan") if est is None else float(est)})
-            print(f"  {view}, {out[-1]['criterion']}: {out[-1]['triangles']:,} / {out[-1]['full']:,} triangles, "
-                  f"{out[-1]['psnr_db']:.1f} dB (estimated {out[-1]['estimated_psnr_db']:.1f})", flush=True)
+            print(f"  {view}, light {light_name}, {out[-1]['criterion']}: {out[-1]['triangles']:,} / "
+                  f"{out[-1]['full']:,} triangles, {out[-1]['psnr_db']:.1f} dB (estimated "
+                  f"{out[-1]['estimated_psnr_db']:.1f})", flush=True)
     return out
 
 
@@ -246,7 +276,7 @@ def print_tables(rows: list[dict], static: list[dict], summary: list[dict]) -> N
                            ("min_psnr_db", "worst dB", ".1f")]))
     print()
     print(table(static, [("scene", "scene", "s"), ("family", "family", "s"), ("view", "view", "s"),
-                         ("criterion", "criterion (default)", "s"), ("triangles", "triangles", ",.0f"),
+                         ("light", "light", "s"), ("criterion", "criterion (default)", "s"), ("triangles", "triangles", ",.0f"),
                          ("full", "full", ",.0f"), ("fewer", "x fewer", ".1f"), ("psnr_db", "PSNR dB", ".1f"),
                          ("estimated_psnr_db", "estimated dB (E-3)", ".1f")]))
     print()
