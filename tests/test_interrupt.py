@@ -205,3 +205,25 @@ def test_sigint_mid_bake_exits_130_keeps_partial_and_resume_finishes(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.toml", "out.zarr"]  # the partial became the store
     ids, coeffs = store.sample(35)  # --full: every referenced vertex
     assert len(ids) == int(store.referenced.sum()) and np.isfinite(coeffs).all()
+
+
+def test_ctrl_c_inside_a_progress_bar_waits_until_the_bar_is_whole(monkeypatch):
+    """A SIGINT that lands while tqdm builds a bar is raised once the bar exists (a half-made bar's finaliser
+    printed a traceback at exit, so an interrupted bake printed more than its one line)."""
+    import tqdm as tqdm_module
+
+    from lodprt.cli.progress import new_bar
+
+    made = []
+
+    class Interrupted(tqdm_module.tqdm):
+        def __init__(self, *args, **kwargs):
+            os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C arrives while the bar is being made
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(tqdm_module, "tqdm", Interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        new_bar(total=3, desc="bake", unit="sample")
+    assert len(made) == 1 and hasattr(made[0], "pos")  # whole when the interrupt was raised
+    made[0].close()

@@ -2,7 +2,31 @@
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
+
+
+def new_bar(**options):
+    """A tqdm bar on stderr made with Ctrl-C held back until it exists: a SIGINT inside tqdm's constructor left a
+    half-made bar whose finaliser printed a traceback at exit (the interrupted command must print one line only).
+    In the main thread a SIGINT meanwhile is recorded, then handed to the previous handler once the bar is made."""
+    from tqdm import tqdm
+
+    if threading.current_thread() is not threading.main_thread():
+        return tqdm(file=sys.stderr, **options)
+    pending = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: pending.append(frame))
+    try:
+        bar = tqdm(file=sys.stderr, **options)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if pending:  # the Ctrl-C that came meanwhile, now that the bar is whole
+        if callable(previous):
+            previous(signal.SIGINT, pending[0])
+        elif previous == signal.SIG_DFL:
+            raise KeyboardInterrupt
+    return bar
 
 
 class ProgressBars:
@@ -19,9 +43,7 @@ class ProgressBars:
 
         def update(done, total):
             if name not in self._bars:
-                from tqdm import tqdm
-
-                self._bars[name] = tqdm(total=total, unit=unit, desc=name, file=sys.stderr)
+                self._bars[name] = new_bar(total=total, unit=unit, desc=name)
             self._bars[name].update(done - self._bars[name].n)
 
         return update
@@ -37,9 +59,7 @@ class ProgressBars:
 
 def with_progress(total: int, desc: str, unit: str, work):
     """``work(progress)`` with a transient bar of ``total`` steps on stderr, ``progress(done, total)`` advancing it."""
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, leave=False)
+    bar = new_bar(total=total, unit=unit, desc=desc, leave=False)
     try:
         return work(lambda done, _total: bar.update(done - bar.n))
     finally:
