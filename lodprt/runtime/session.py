@@ -467,8 +467,8 @@ class Runtime:
                 coef, rad = self._relight(vid)
                 if not self._shadow_edges(vid, tri, rad):
                     break
-            steer += time.perf_counter() - t3  # cut work too
-            t3 = time.perf_counter()
+        steer += time.perf_counter() - t3  # M-6 (and its first-frame rounds) count as cut work
+        t3 = time.perf_counter()
         if self.triangle_budget is not None:  # steer the bound toward the budget
             new = frame_error.toward_budget(self.error_bound, len(tri), self.triangle_budget)
             self.error_bound, self.refinement.dirty = new, self.refinement.dirty or new != self.error_bound
