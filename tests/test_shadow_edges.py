@@ -67,6 +67,9 @@ def test_lit_bits_match_a_second_ray_caster(bars):
     want = (state == reference.LIT).astype(np.int32)
     assert 0 < want.sum() < len(want)  # some drawn vertices in the bars' shadows
     assert (lit != want).mean() < 0.002, np.flatnonzero(lit != want)[:10]  # float32 against float64 rays
+    kept = lit.copy()
+    rt.coefficients(np.arange(len(kept)))  # other vertices, as many: the frame's bits stay the frame's
+    assert np.array_equal(rt.lighting.lit_rows(len(kept)), kept)
 
 
 def test_straddling_steps_against_loops():

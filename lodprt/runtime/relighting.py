@@ -49,6 +49,7 @@ class Relighting:
         self.channels, self.ncoef = self.samples.C, self.samples.n
         self.weights = None
         self.rays = 0  # shadow rays the last relight cast (M-3)
+        self.frame_lit = None  # which lights reach each vertex of the last relight_vertices (M-6), or None
         self._vis = None  # device copy of the samples' visibility and the cache version it holds
         self._vis_version = -1
 
@@ -119,9 +120,9 @@ class Relighting:
                                     threads=launch)
 
     def lit_rows(self, count: int) -> np.ndarray | None:
-        """(count,) int32: which lights reached each vertex of the last relight (bit per light, M-6), or None
-        without a direct term (T-12) or when the last relight had another number of rows."""
-        lit = None if self.direct is None else self.direct.lit
+        """(count,) int32: which lights reached each vertex of the last ``relight_vertices`` (bit per light, M-6),
+        or None without a direct term (T-12) or when that relight had another number of rows."""
+        lit = self.frame_lit
         return lit if lit is not None and len(lit) == count else None
 
     def relight_vertices(self, vid: np.ndarray, eye, arrays: dict, frame_inputs, launch) -> tuple[np.ndarray,
@@ -136,11 +137,13 @@ class Relighting:
 
         wp, dev = warp(), self.device
         A = len(vid)
+        self.frame_lit = None
         if not self.uses_samples:  # M-1 on a direct-only store: the direct term alone
             coef = wp.zeros((A, 3, self.ncoef), dtype=wp.float32, device=dev)
             rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
             if A:
                 self.add_direct(vid, coef, eye=eye, radiance=rad, launch=launch)
+                self.frame_lit = self.direct.lit  # kept apart: coefficients() relights other vertices
             return coef.numpy(), rad.numpy()
         coef = wp.empty((A, 3, self.ncoef), dtype=wp.float32, device=dev)  # every entry is written
         rad = wp.empty((A, 3), dtype=wp.float32, device=dev)
@@ -151,6 +154,7 @@ class Relighting:
                 wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), arrays["positions"], arrays["normals"],
                 wp.vec3(*map(float, eye)), used, weights, arrays["coeffs"], basis], [coef, rad])
             self.add_direct(vid, coef, eye=eye, radiance=rad, eye_basis=basis, launch=launch)  # M-1
+            self.frame_lit = None if self.direct is None else self.direct.lit
         return coef.numpy(), rad.numpy()
 
     def coefficients(self, vertex_ids) -> np.ndarray:
