@@ -51,7 +51,7 @@ def test_closed_form_equals_quadrature_kernel(device, bunny_path):
     sel = np.flatnonzero(vis == LIT)[::50].astype(np.int32)
     dirs, weights = sh.quadrature(96)
     y = sh.basis(dirs, order).astype(np.float32)
-    tables = material_tables(scene, order, 1)
+    tables = material_tables(scene.materials, order, 1)
     out = wp.zeros((len(sel), 1, order * order), dtype=wp.float32, device=device)
     wp.launch(
         kshade.phong_sh_quadrature,

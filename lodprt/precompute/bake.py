@@ -478,7 +478,7 @@ def _write_scene(writer: StoreWriter, scene: Scene, sh_order: int) -> None:
     writer.array("scene/material_id", scene.material_id.astype(np.int32), chunk_rows=1 << 18)
     writer.array("scene/object_id", scene.object_id.astype(np.int32), chunk_rows=1 << 18)
     writer.attrs("scene", object_names=list(scene.object_names))
-    tables = material_tables(scene, sh_order, 3)
+    tables = material_tables(scene.materials, sh_order, 3)
     writer.array("materials/kd", tables["kd"])
     writer.array("materials/ks", tables["ks"])
     writer.array("materials/shininess", tables["shininess"])

@@ -16,7 +16,7 @@ from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.kernels.visibility import BACK_FACING
 from lodprt.model import sh
-from lodprt.model.scene import Scene, ray_offset  # noqa: F401  (ray_offset: the bake's, re-exported)
+from lodprt.model.scene import Material, Scene, ray_offset  # noqa: F401  (ray_offset: the bake's, re-exported)
 
 def layout(scene: Scene, sh_order: int) -> tuple[int, int]:
     """(coefficients per vertex, channels) the scene needs: 1 coefficient without specular, 1 channel when grey."""
@@ -25,15 +25,16 @@ def layout(scene: Scene, sh_order: int) -> tuple[int, int]:
     return (sh_order * sh_order if specular else 1), (1 if grey else 3)
 
 
-def material_tables(scene: Scene, sh_order: int, channels: int) -> dict[str, np.ndarray]:
-    """Per-material kd (M, C), ks (M,), shininess (M,) and the scaled zonal table (M, order) of the Phong lobe."""
-    kd = np.array([m.kd[:channels] for m in scene.materials], np.float32)
-    ks = np.array([m.ks for m in scene.materials], np.float32)
-    n = np.array([m.shininess for m in scene.materials], np.float32)
+def material_tables(materials: list[Material], sh_order: int, channels: int) -> dict[str, np.ndarray]:
+    """Per-material kd (M, C), ks (M,), shininess (M,) and the scaled zonal table (M, order) of the Phong lobe
+    (``materials``: a scene's or a store's ``Material`` list)."""
+    kd = np.array([m.kd[:channels] for m in materials], np.float32)
+    ks = np.array([m.ks for m in materials], np.float32)
+    n = np.array([m.shininess for m in materials], np.float32)
     bands = np.arange(sh_order)
     # P-6 factor sqrt(4 pi/(2l+1)) folded in: lobe_lm = sqrt(4 pi/(2l+1)) z_l y_lm(R)
     zonal = np.array(
-        [np.sqrt(4 * np.pi / (2 * bands + 1)) * sh.cosine_power_zonal(m.shininess, sh_order) for m in scene.materials],
+        [np.sqrt(4 * np.pi / (2 * bands + 1)) * sh.cosine_power_zonal(m.shininess, sh_order) for m in materials],
         np.float32,
     )
     return {"kd": kd, "ks": ks, "shininess": n, "zonal": zonal}
@@ -65,7 +66,7 @@ class Baker:
         self.indices = wp.array(scene.faces.astype(np.int32).ravel(), dtype=wp.int32, device=device)
         self.mesh = wp.Mesh(points=self.points, indices=self.indices)
         self.material_id = wp.array(scene.material_id.astype(np.int32), dtype=wp.int32, device=device)
-        tables = material_tables(scene, sh_order, self.channels)
+        tables = material_tables(scene.materials, sh_order, self.channels)
         self.kd = wp.array(tables["kd"], dtype=wp.float32, device=device)
         self.ks = wp.array(tables["ks"], dtype=wp.float32, device=device)
         self.zonal = wp.array(tables["zonal"], dtype=wp.float32, device=device)

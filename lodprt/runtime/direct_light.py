@@ -53,25 +53,27 @@ class DirectLight:
         self.wp, self.device, self.store = wp, device, store
         self.mode = {"direct": kdirect.RAYS, "direct-agree": kdirect.AGREE_OR_RAY, "direct-blend": kdirect.BLEND}[
             interpolation]
-        scene = store.scene()
-        self.scene = scene
         self.ncoef = store.coefficients_per_vertex
         self.channels = int(store.root.attrs.get("channels", 1))
         order = store.sh_order
-        tables = material_tables(scene, order, 3)
-        stored = material_tables(scene, order, self.channels)  # the bake's tables
-        v3 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.vec3, device=device)  # noqa: E731
-        self.points = v3(scene.positions)
-        self.normals = v3(scene.normals)
-        self.indices = wp.array(np.ascontiguousarray(scene.faces, np.int32).ravel(), dtype=wp.int32, device=device)
+        materials = store.materials()
+        tables = material_tables(materials, order, 3)
+        stored = material_tables(materials, order, self.channels)  # the bake's tables
+        # the store's float32 / int32 arrays as baked, wrapped (not copied) on the CPU: the Runtime holds the same
+        share = lambda a, dtype, t: wp.array(np.ascontiguousarray(a, dtype), dtype=t, device=device,  # noqa: E731
+                                             copy=device != "cpu")
+        self.points = share(store.positions, np.float32, wp.vec3)
+        self.normals = share(store.normals, np.float32, wp.vec3)
+        self.indices = share(np.ascontiguousarray(store.faces, np.int32).ravel(), np.int32, wp.int32)
         self.mesh = wp.Mesh(points=self.points, indices=self.indices)
-        self.material_id = wp.array(scene.material_id.astype(np.int32), dtype=wp.int32, device=device)
+        self.material_id = share(store.read("scene/material_id"), np.int32, wp.int32)
+        lights = store.lights()
         f32 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.float32, device=device)  # noqa: E731
         self.kd, self.ks, self.zonal = f32(tables["kd"]), f32(tables["ks"]), f32(tables["zonal"])
         self.kd_stored = f32(stored["kd"])  # the store's channels: the residual is in the store's layout
         self.offset = float(store.attrs["ray_offset"])  # the bake's, so that V_j is the bake's visibility
-        self.falloff = 1 if scene.lights.falloff == "inverse-square" else 0
-        self.radius = float(scene.lights.radius)
+        self.falloff = 1 if lights.falloff == "inverse-square" else 0
+        self.radius = float(lights.radius)
         self.referenced = np.flatnonzero(store.referenced).astype(np.int32)
         self.ref_ids = wp.array(self.referenced, dtype=wp.int32, device=device)
         self.num_vertices = store.num_vertices

@@ -71,6 +71,15 @@ class NodeErrors(typing.NamedTuple):
     e_detail: np.ndarray
 
 
+def scaled_error_vectors(h, deviation: np.ndarray) -> np.ndarray:
+    """S-3: (N, 3) float32 each node's error vector direction (its cone axis where the node's own vector is 0) at
+    length ``deviation`` (the subtree's accumulated deviation, ``node_bounds.subtree_deviation``)."""
+    own = np.asarray(h.error_vector, np.float64)
+    length = np.linalg.norm(own, axis=1)
+    unit = np.where(length[:, None] > 0, own / np.maximum(length, 1e-300)[:, None], h.cone_axis)
+    return np.ascontiguousarray(unit * deviation[:, None], np.float32)
+
+
 class Runtime:
     """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
 
@@ -118,11 +127,13 @@ class Runtime:
         self.device = resolve_device(device)
         self.store = store
         self.h = h = store.hierarchy()
-        self.faces = np.asarray(store.faces, np.int64)
-        self.positions = np.asarray(store.positions, np.float64)
-        self.normals = np.asarray(store.normals, np.float64)
-        self._pos32, self._nrm32 = self.positions.astype(np.float32), self.normals.astype(np.float32)  # frames
-        self.bounds = np.array([self.positions.min(0), self.positions.max(0)]) if len(self.positions) else np.zeros((2, 3))
+        # the store's own arrays (read once, kept on the Store), float32 and int32: one copy of the geometry serves
+        # the frames, the kernels (wrapped, not copied, on the CPU) and the direct light's BVH (docs/SCALE.md)
+        self.faces = np.ascontiguousarray(store.faces, np.int32)
+        self.positions = np.ascontiguousarray(store.positions, np.float32)
+        self.normals = np.ascontiguousarray(store.normals, np.float32)
+        self.bounds = np.array([self.positions.min(0), self.positions.max(0)], np.float64) if len(self.positions) \
+            else np.zeros((2, 3))
         if triangle_budget is not None and int(triangle_budget) < 1:
             raise LodprtError(f"triangle_budget {triangle_budget}: must be >= 1")
         self.triangle_budget = None if triangle_budget is None else int(triangle_budget)
@@ -141,21 +152,18 @@ class Runtime:
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
         self._synced = -1  # the sample cache's version the device arrays hold
-        # per-node geometry for the error terms
-        self.node_pos = self.positions[h.vertex]
+        # per-node geometry for the error terms (float32: what the kernels read)
+        self.node_pos = np.take(self.positions, h.vertex, axis=0)
         internal = h.children[:, 1] >= 0
-        self.node_collapsed = np.where(internal[:, None], self.positions[h.vertex[np.maximum(h.children[:, 1], 0)]],
-                                       self.node_pos)
+        self.node_collapsed = np.take(self.positions, h.vertex[np.maximum(h.children[:, 1], 0)], axis=0)
+        self.node_collapsed[~internal] = self.node_pos[~internal]
         # S-3: the error vector's direction at the subtree's accumulated deviation (one collapse's vector measures
         # one step; a coarse node stands for all the steps under it)
         self._levels = node_bounds.height_levels(h)
-        own = h.error_vector.astype(np.float64)
-        length = np.linalg.norm(own, axis=1)
-        unit = np.where(length[:, None] > 0, own / np.maximum(length, 1e-300)[:, None], h.cone_axis)
-        self.error_vector = unit * node_bounds.subtree_deviation(h, self._levels)[:, None]
-        self.axis = h.cone_axis.astype(np.float64)
-        self.half = h.cone_half_angle.astype(np.float64)
-        self.radius = h.radius.astype(np.float64)
+        self.error_vector = scaled_error_vectors(h, node_bounds.subtree_deviation(h, self._levels))
+        self.axis = np.ascontiguousarray(h.cone_axis, np.float32)
+        self.half = np.ascontiguousarray(h.cone_half_angle, np.float32)
+        self.radius = np.ascontiguousarray(h.radius, np.float32)
         self._upload()
         cut = Cut.base(h, self.faces) if self.lod else Cut.full(h, self.faces)
         #: how the cut moves (refine/coarsen passes) and when a candidate's error is evaluated again
@@ -248,8 +256,9 @@ class Runtime:
         dev = self.device
         self._threads = max(1, min(os.cpu_count() or 1, 8))
         self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=self._threads) if self._threads > 1 else None
-        v3 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.vec3, device=dev)  # noqa: E731
-        f1 = lambda a: wp.array(np.ascontiguousarray(a, np.float32), dtype=wp.float32, device=dev)  # noqa: E731
+        # on the CPU the Warp arrays wrap the float32 numpy arrays (no second copy)
+        v3 = lambda a: wp.array(a, dtype=wp.vec3, device=dev, copy=dev != "cpu")  # noqa: E731
+        f1 = lambda a: wp.array(a, dtype=wp.float32, device=dev, copy=dev != "cpu")  # noqa: E731
         self._wp = wp
         self._d = {
             "node_pos": v3(self.node_pos), "node_collapsed": v3(self.node_collapsed),
@@ -401,7 +410,7 @@ class Runtime:
         """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr and ``steer``, E-4: the bound
         for the next frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the
         cached errors stay: a node cached under the old bound is evaluated again when due)."""
-        self.estimated_psnr, new = frame_error.estimate(self, self._pos32[vid], tri,
+        self.estimated_psnr, new = frame_error.estimate(self, self.positions[vid], tri,
                                                         self.steering if steer else None, lit=self.lit_vertices())
         if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
@@ -422,7 +431,7 @@ class Runtime:
             return d.mesh
         if "bvh" not in self._d:
             wp = self._wp
-            idx = wp.array(np.ascontiguousarray(self.faces, np.int32).ravel(), dtype=wp.int32, device=self.device)
+            idx = wp.array(self.faces.ravel(), dtype=wp.int32, device=self.device, copy=self.device != "cpu")
             self._d["bvh"] = wp.Mesh(points=self._d["positions"], indices=idx)
         return self._d["bvh"]
 
@@ -490,8 +499,8 @@ class Runtime:
             "ms_relight": 1e3 * (t3 - t2 - steer),
             "ms_total": 1e3 * (t3 - t0),
         }
-        return Frame(vertex_ids=vid, positions=np.take(self._pos32, vid, axis=0),
-                     normals=np.take(self._nrm32, vid, axis=0), triangles=tri.astype(np.int32),
+        return Frame(vertex_ids=vid, positions=np.take(self.positions, vid, axis=0),
+                     normals=np.take(self.normals, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
 

@@ -12,6 +12,27 @@ from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, active_ancestors, concat_ranges, triangulate
 
 
+def leaf_order_adjacency(h: Hierarchy, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The original mesh's edges in CSR, rows in depth-first leaf order (so a subtree's edges are one slice), each
+    row's neighbours ascending: (neighbours (E,) int32, offsets (V + 1,) int64). One int64 key per directed edge
+    (rank of its first vertex x V + its second), sorted in place: memory of a few copies of the edge list."""
+    V = h.num_vertices
+    rank = np.empty(V, np.int64)
+    rank[h.leaf_order] = np.arange(V)
+    f = faces
+    key = np.empty(6 * len(f), np.int64)
+    for i, (a, b) in enumerate(((0, 1), (1, 2), (2, 0), (1, 0), (2, 1), (0, 2))):
+        key[i * len(f):(i + 1) * len(f)] = rank[f[:, a]] * V + f[:, b]
+    key.sort()
+    keep = np.ones(len(key), bool)
+    keep[1:] = key[1:] != key[:-1]
+    key = key[keep]
+    first, nbr = np.divmod(key, V)
+    del key
+    keep = rank[nbr] != first  # an edge of a degenerate face from a vertex to itself
+    return nbr[keep].astype(np.int32), np.searchsorted(first[keep], np.arange(V + 1))
+
+
 class Cut:
     """A front of active nodes: every original vertex has exactly one active ancestor-or-self.
 
@@ -23,20 +44,13 @@ class Cut:
 
     def __init__(self, hierarchy: Hierarchy, faces: np.ndarray, active: np.ndarray):
         self.h = hierarchy
-        self.faces = np.asarray(faces, np.int64)
         V = hierarchy.num_vertices
-        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or (len(self.faces) and (self.faces.min() < 0 or self.faces.max() >= V)):
+        faces = np.asarray(faces)
+        if faces.ndim != 2 or faces.shape[1] != 3 or (len(faces) and (faces.min() < 0 or faces.max() >= V)):
             raise LodprtError(f"Cut: faces must be (F, 3) indices into the hierarchy's {V} vertices")
+        self.faces = np.ascontiguousarray(faces, np.int32)
         self.active = np.asarray(active, bool).copy()
-        # original adjacency in CSR, rows in depth-first leaf order, so a subtree's edges are one slice
-        f = self.faces
-        e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]], f[:, [1, 0]], f[:, [2, 1]], f[:, [0, 2]]])
-        e = np.unique(e[e[:, 0] != e[:, 1]], axis=0)
-        rank = np.empty(V, np.int64)
-        rank[hierarchy.leaf_order] = np.arange(V)
-        e = e[np.argsort(rank[e[:, 0]], kind="stable")]
-        self._nbr = e[:, 1].astype(np.int32)
-        self._ptr = np.searchsorted(rank[e[:, 0]], np.arange(V + 1))
+        self._nbr, self._ptr = leaf_order_adjacency(hierarchy, self.faces)
         self.anc = np.ascontiguousarray(active_ancestors(hierarchy, self.active), np.int32)
         self._dev: dict = {}  # per Warp device: the arrays of the sequential kernels (``_device_arrays``)
 

@@ -202,10 +202,8 @@ class Store:
 
     def scene(self):
         """The baked scene rebuilt from the store (positions, normals and faces exactly as baked)."""
-        from lodprt.model.scene import Lights, Material, Scene
+        from lodprt.model.scene import Scene
 
-        kd, ks, n = self.read("materials/kd"), self.read("materials/ks"), self.read("materials/shininess")
-        a = dict(self.root["lights"].attrs)
         return Scene(
             positions=self.positions.astype(np.float64),
             faces=self.faces,
@@ -213,11 +211,25 @@ class Store:
             material_id=self.read("scene/material_id"),
             object_id=self.read("scene/object_id"),
             referenced=self.referenced.copy(),
-            materials=[Material(tuple(float(x) for x in kd[m]), float(ks[m]), float(n[m])) for m in range(len(ks))],
+            materials=self.materials(),
             object_names=list(self.root["scene"].attrs.get("object_names", [])),
-            lights=Lights(tuple(a["grid"]), tuple(a["box"]), tuple(a["intensity"]), a["falloff"], float(a["radius"])),
+            lights=self.lights(),
             source=str(self.attrs.get("source", self.path)),
         )
+
+    def materials(self) -> list:
+        """The baked scene's materials (``lodprt.model.scene.Material``), without its geometry."""
+        from lodprt.model.scene import Material
+
+        kd, ks, n = self.read("materials/kd"), self.read("materials/ks"), self.read("materials/shininess")
+        return [Material(tuple(float(x) for x in kd[m]), float(ks[m]), float(n[m])) for m in range(len(ks))]
+
+    def lights(self):
+        """The baked scene's light grid (``lodprt.model.scene.Lights``)."""
+        from lodprt.model.scene import Lights
+
+        a = dict(self.root["lights"].attrs)
+        return Lights(tuple(a["grid"]), tuple(a["box"]), tuple(a["intensity"]), a["falloff"], float(a["radius"]))
 
     @property
     def has_hierarchy(self) -> bool:
