@@ -151,3 +151,23 @@ def test_triangles_monotone_in_the_bound(box_shadow):
               for e in (0.005, 0.02, 0.05, 0.1, 0.2, 0.5)]
     assert all(a >= b for a, b in zip(counts, counts[1:])), counts
     assert counts[0] > counts[-1]
+
+
+def test_leaf_order_adjacency_matches_the_faces(bunny_floor, bunny_hierarchy):
+    """The Cut's CSR of original edges against a plain set of the faces' edges: each row (in depth-first leaf
+    order) holds exactly the vertex's distinct neighbours, ascending, no self-loop, even with a degenerate face."""
+    from lodprt.runtime.view_cut import leaf_order_adjacency
+
+    h = bunny_hierarchy
+    faces = np.asarray(bunny_floor.faces, np.int32)
+    faces = np.vstack([faces, [[faces[0, 0], faces[0, 0], faces[0, 1]]]])  # a degenerate face: one self-edge
+    nbr, ptr = leaf_order_adjacency(h, faces)
+    want = [set() for _ in range(h.num_vertices)]
+    for a, b, c in faces.tolist():
+        for x, y in ((a, b), (b, c), (c, a)):
+            if x != y:
+                want[x].add(y)
+                want[y].add(x)
+    assert ptr[-1] == len(nbr) == sum(len(w) for w in want)
+    for row, v in enumerate(h.leaf_order.tolist()):
+        assert nbr[ptr[row]:ptr[row + 1]].tolist() == sorted(want[v])
