@@ -1,7 +1,9 @@
 """Hierarchy build, one round of collapses (SPEC 3; thesis 3.2, figures 5, 6 and 10; tag H-R), float64 Warp kernels.
 
-The host (``lodprt.model.hierarchy_rounds``) owns the round: it builds the adjacency (CSR of sorted neighbours with
-the faces on each edge) and the face corners around each vertex, launches these kernels, and records the nodes.
+The host (``lodprt.model.hierarchy_rounds``) owns the round: it builds the face corners around each vertex and the
+one-rings (``fill_corners``, ``gather_rings``), launches these kernels, and records the nodes. A one-ring lives in a
+padded CSR: vertex ``v``'s sorted distinct neighbours are ``dst[start[v]:end[v]]`` with ``start = 2 x`` its corner
+start (two ring entries per corner, deduplicated in place), the faces on each edge in ``count`` beside them.
 
 * ``best_moves``: each movable vertex's cheapest legal move ``v -> u`` (QEM cost of ``u``'s position under
   ``Q_v + Q_u`` plus ``edge_weight |uv|^4``; legal: boundary and component rules, link condition, the survivor's
@@ -9,7 +11,9 @@ the faces on each edge) and the face corners around each vertex, launches these 
 * ``greedy_select``: the round's pairwise non-conflicting collapses, taken in rank order (one thread).
 * ``collapse_errors``: the error vector of each collapse (figure 10).
 
-Every loop is sized from the arrays' shapes or the CSR starts read from them.
+The per-vertex and per-collapse kernels take ``first``, the index of their thread 0: the host splits one pass into
+slices launched from several threads at once (each thread writes only its own vertices' or collapses' outputs).
+Every loop is sized from the arrays' shapes or the CSR starts and ends read from them.
 """
 
 import warp as wp
@@ -38,17 +42,18 @@ def quadric_at(q: wp.array2d(dtype=wp.float64), i: int, x: wp.vec3d):
 
 
 @wp.func
-def is_neighbour(start: wp.array(dtype=wp.int64), dst: wp.array(dtype=wp.int32), a: int, w: int):
+def is_neighbour(start: wp.array(dtype=wp.int64), end: wp.array(dtype=wp.int64), dst: wp.array(dtype=wp.int32),
+                 a: int, w: int):
     """Whether ``w`` is among ``a``'s sorted neighbours (binary search)."""
     lo = int(start[a])
-    hi = int(start[a + 1])
+    hi = int(end[a])
     while lo < hi:
         mid = (lo + hi) // 2
         if dst[mid] < w:
             lo = mid + 1
         else:
             hi = mid
-    if lo < int(start[a + 1]):
+    if lo < int(end[a]):
         return dst[lo] == w
     return False
 
@@ -57,18 +62,18 @@ def is_neighbour(start: wp.array(dtype=wp.int64), dst: wp.array(dtype=wp.int32),
 def legal_move(
     v: int, u: int, e: int,
     pos: wp.array2d(dtype=wp.float64), faces: wp.array2d(dtype=wp.int32), boundary: wp.array(dtype=wp.uint8),
-    start: wp.array(dtype=wp.int64), dst: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
-    fstart: wp.array(dtype=wp.int64), corner: wp.array(dtype=wp.int32),
+    start: wp.array(dtype=wp.int64), end: wp.array(dtype=wp.int64), dst: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32), fstart: wp.array(dtype=wp.int64), corner: wp.array(dtype=wp.int32),
     fold_cos: wp.float64, sliver: wp.float64, max_valence: int,
 ):
     """Link condition (the common neighbours of u and v are the third corners of the faces on uv), valence of the
     survivor, and no fold-over or sliver on the faces that move (docs/HIERARCHY.md)."""
     common = int(0)
-    for k in range(int(start[v]), int(start[v + 1])):
+    for k in range(int(start[v]), int(end[v])):
         w = dst[k]
-        if w != u and is_neighbour(start, dst, u, w):
+        if w != u and is_neighbour(start, end, dst, u, w):
             common += 1
-    after = int(start[u + 1] - start[u]) + int(start[v + 1] - start[v]) - common - 2
+    after = int(end[u] - start[u]) + int(end[v] - start[v]) - common - 2
     least = 3
     if boundary[u] != wp.uint8(0):
         least = 2
@@ -101,6 +106,7 @@ def legal_move(
 
 @wp.kernel
 def best_moves(
+    first: int,  # In: the vertex of thread 0 (a slice of the pass)
     pos: wp.array2d(dtype=wp.float64),  # In: (n, 3) live positions
     quadric: wp.array2d(dtype=wp.float64),  # In: (n, 10) QEM quadrics
     faces: wp.array2d(dtype=wp.int32),  # In: (M, 3) live faces
@@ -111,20 +117,21 @@ def best_moves(
     level: wp.array(dtype=wp.int32),  # In: (n,) seeded removal level (read when phase >= 0)
     phase: int,  # In: seeded phase (targets survive it), -1 for none
     split: int,  # In: 1 when groups may touch (moves stay within a group)
-    start: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's sorted neighbours
-    dst: wp.array(dtype=wp.int32),  # In: (K,) neighbours
-    count: wp.array(dtype=wp.int32),  # In: (K,) faces on each edge
+    start: wp.array(dtype=wp.int64),  # In: (n + 1,) start of each vertex's sorted neighbours (padded CSR)
+    end: wp.array(dtype=wp.int64),  # In: (n,) end of each vertex's sorted neighbours
+    dst: wp.array(dtype=wp.int32),  # In: (6M,) neighbours
+    count: wp.array(dtype=wp.int32),  # In: (6M,) faces on each edge
     fstart: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's face corners
     corner: wp.array(dtype=wp.int32),  # In: (3M,) flat corner indices into faces
     edge_weight: wp.float64,  # In: weight of |uv|^4 in the cost
     fold_cos: wp.float64,  # In: a moved face keeps its normal within this cosine
     sliver: wp.float64,  # In: twice the area below sliver x longest edge^2 is a sliver
     max_valence: int,  # In: largest valence of a survivor
-    edge_cost: wp.array(dtype=wp.float64),  # Temp: (K,) cost of each edge's move (NONE: not a candidate)
+    edge_cost: wp.array(dtype=wp.float64),  # Temp: (6M,) cost of each edge's move (NONE: not a candidate)
     best: wp.array(dtype=wp.int64),  # Out: (n,) edge index of the cheapest legal move, -1 when none
     best_cost: wp.array(dtype=wp.float64),  # Out: (n,) its cost (undefined where best is -1)
 ):
-    v = wp.tid()
+    v = first + wp.tid()
     best[v] = wp.int64(-1)
     best_cost[v] = wp.float64(0.0)
     if due[v] == wp.uint8(0):
@@ -132,7 +139,7 @@ def best_moves(
     pv = vec_at(pos, v)
     need = 2 - int(boundary[v])  # boundary vertices move along boundary edges only (one face)
     lo = int(start[v])
-    hi = int(start[v + 1])
+    hi = int(end[v])
     left = int(0)
     for e in range(lo, hi):
         u = dst[e]
@@ -158,7 +165,7 @@ def best_moves(
                 at = e
         if at < 0:
             return  # costs of NONE or more (not finite) are no moves
-        if legal_move(v, dst[at], at, pos, faces, boundary, start, dst, count, fstart, corner, fold_cos, sliver,
+        if legal_move(v, dst[at], at, pos, faces, boundary, start, end, dst, count, fstart, corner, fold_cos, sliver,
                       max_valence):
             best[v] = wp.int64(at)
             best_cost[v] = low
@@ -168,17 +175,19 @@ def best_moves(
 
 
 @wp.func
-def ring_min(x: wp.array(dtype=wp.float64), a: int, start: wp.array(dtype=wp.int64), dst: wp.array(dtype=wp.int32)):
+def ring_min(x: wp.array(dtype=wp.float64), a: int, start: wp.array(dtype=wp.int64), end: wp.array(dtype=wp.int64),
+             dst: wp.array(dtype=wp.int32)):
     m = x[a]
-    for k in range(int(start[a]), int(start[a + 1])):
+    for k in range(int(start[a]), int(end[a])):
         m = wp.min(m, x[dst[k]])
     return m
 
 
 @wp.func
-def mark_ring(x: wp.array(dtype=wp.uint8), a: int, start: wp.array(dtype=wp.int64), dst: wp.array(dtype=wp.int32)):
+def mark_ring(x: wp.array(dtype=wp.uint8), a: int, start: wp.array(dtype=wp.int64), end: wp.array(dtype=wp.int64),
+              dst: wp.array(dtype=wp.int32)):
     x[a] = wp.uint8(1)
-    for k in range(int(start[a]), int(start[a + 1])):
+    for k in range(int(start[a]), int(end[a])):
         x[dst[k]] = wp.uint8(1)
 
 
@@ -187,8 +196,9 @@ def greedy_select(
     order: wp.array(dtype=wp.int32),  # In: (P,) the vertices with a legal move, in rank order
     target: wp.array(dtype=wp.int32),  # In: (n,) each vertex's target u
     rank_class: wp.array(dtype=wp.float64),  # In: (n,) each proposal's cost class
-    start: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's neighbours
-    dst: wp.array(dtype=wp.int32),  # In: (K,) neighbours
+    start: wp.array(dtype=wp.int64),  # In: (n + 1,) start of each vertex's neighbours (padded CSR)
+    end: wp.array(dtype=wp.int64),  # In: (n,) end of each vertex's neighbours
+    dst: wp.array(dtype=wp.int32),  # In: (6M,) neighbours
     ring_v: wp.array(dtype=wp.uint8),  # Temp: (n,) zeros: closed one-rings of the v made
     ring_vu: wp.array(dtype=wp.uint8),  # Temp: (n,) zeros: ... and of their u
     wait_v: wp.array(dtype=wp.float64),  # Temp: (n,) +inf: class of each vertex's waiting proposal
@@ -203,17 +213,20 @@ def greedy_select(
         c = rank_class[v]
         # a proposal conflicting with a made collapse, or with a waiting one of a cheaper class, waits
         stop = ring_vu[v] != wp.uint8(0) or ring_v[u] != wp.uint8(0)
+        if not stop:  # a cheaper waiting class in either ring, in turn (the first one found decides)
+            stop = ring_min(wait_v, v, start, end, dst) < c
         if not stop:
-            w = wp.min(ring_min(wait_v, v, start, dst), ring_min(wait_v, u, start, dst))
-            stop = wp.min(w, ring_min(wait_u, v, start, dst)) < c
+            stop = ring_min(wait_v, u, start, end, dst) < c
+        if not stop:
+            stop = ring_min(wait_u, v, start, end, dst) < c
         if stop:
             wait_v[v] = c
             wait_u[u] = wp.min(wait_u[u], c)
         else:
             made[i] = wp.uint8(1)
-            mark_ring(ring_v, v, start, dst)
-            mark_ring(ring_vu, v, start, dst)
-            mark_ring(ring_vu, u, start, dst)
+            mark_ring(ring_v, v, start, end, dst)
+            mark_ring(ring_vu, v, start, end, dst)
+            mark_ring(ring_vu, u, start, end, dst)
 
 
 @wp.func
@@ -273,6 +286,7 @@ def closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d):
 
 @wp.kernel
 def collapse_errors(
+    first: int,  # In: the collapse of thread 0 (a slice of the pass)
     pos: wp.array2d(dtype=wp.float64),  # In: (n, 3) live positions
     faces: wp.array2d(dtype=wp.int32),  # In: (M, 3) the faces before the round's collapses
     fstart: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's face corners
@@ -281,7 +295,7 @@ def collapse_errors(
     cu: wp.array(dtype=wp.int32),  # In: (C,) their survivors u
     error: wp.array2d(dtype=wp.float64),  # Out: (C, 3) p_v - p', p' closest on the faces around u after (fig. 10)
 ):
-    i = wp.tid()
+    i = first + wp.tid()
     v = int(cv[i])
     u = int(cu[i])
     p = vec_at(pos, v)
@@ -330,58 +344,116 @@ def fill_corners(
     corner[fstart[v] + wp.int64(wp.atomic_add(fill, v, 1))] = c  # ascending within a vertex on the CPU
 
 
+@wp.func
+def sort_segment(a: wp.array(dtype=wp.int32), lo: int, m: int):
+    """Sort ``a[lo:lo + m]`` ascending in place (insertion sort; Shell sort, halving gaps, past 32 entries)."""
+    gap = int(1)
+    if m > 32:
+        gap = m // 2
+    while gap > 0:
+        for i in range(lo + gap, lo + m):
+            x = a[i]
+            j = i
+            while j >= lo + gap and a[j - gap] > x:
+                a[j] = a[j - gap]
+                j -= gap
+            a[j] = x
+        gap = gap // 2
+
+
 @wp.kernel
 def gather_rings(
+    first: int,  # In: the vertex of thread 0 (a slice of the pass)
     faces: wp.array2d(dtype=wp.int32),  # In: (M, 3) faces
     fstart: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's corners
     corner: wp.array(dtype=wp.int32),  # In: (3M,) flat corner indices grouped by vertex
-    ring: wp.array(dtype=wp.int32),  # Out: (6M,) the two other corners of each face, per vertex, sorted
-    distinct: wp.array(dtype=wp.int32),  # Out: (n,) distinct neighbours of each vertex
+    dst: wp.array(dtype=wp.int32),  # Out: (6M,) each vertex's distinct neighbours, ascending, from 2 x fstart[v]
+    count: wp.array(dtype=wp.int32),  # Out: (6M,) the faces on each of those edges (Temp before)
+    end: wp.array(dtype=wp.int64),  # Out: (n,) end of each vertex's neighbours in dst
 ):
-    v = wp.tid()
-    lo = 2 * int(fstart[v])
-    m = 2 * int(fstart[v + 1] - fstart[v])
-    for k in range(int(fstart[v]), int(fstart[v + 1])):
-        c = corner[k]
+    v = first + wp.tid()
+    k0 = int(fstart[v])
+    k = int(fstart[v + 1]) - k0
+    lo = 2 * k0
+    for i in range(k):  # the next and the previous corner of each face around v, in two halves
+        c = corner[k0 + i]
         f = c // 3
         j = c % 3
-        at = lo + 2 * (k - int(fstart[v]))
-        ring[at] = faces[f, (j + 1) % 3]
-        ring[at + 1] = faces[f, (j + 2) % 3]
-    gap = int(1)
-    if m > 64:
-        gap = m // 2
-    while gap > 0:  # insertion sort of the segment (Shell sort, halving gaps, for high-valence vertices)
-        for i in range(lo + gap, lo + m):
-            x = ring[i]
-            j = i
-            while j >= lo + gap and ring[j - gap] > x:
-                ring[j] = ring[j - gap]
-                j -= gap
-            ring[j] = x
-        gap = gap // 2
-    d = int(0)
-    for i in range(lo, lo + m):
-        if i == lo or ring[i] != ring[i - 1]:
-            d += 1
-    distinct[v] = d
+        dst[lo + i] = faces[f, (j + 1) % 3]
+        dst[lo + k + i] = faces[f, (j + 2) % 3]
+    sort_segment(dst, lo, k)
+    sort_segment(dst, lo + k, k)
+    a = lo  # merge the halves into count (a scratch here), then fold the repeats into counts
+    b = lo + k
+    for i in range(lo, lo + 2 * k):
+        if b >= lo + 2 * k or (a < lo + k and dst[a] <= dst[b]):
+            count[i] = dst[a]
+            a += 1
+        else:
+            count[i] = dst[b]
+            b += 1
+    o = lo - 1  # count[o] is written once count[o] was read (o < i)
+    run = int(0)
+    for i in range(lo, lo + 2 * k):
+        x = count[i]
+        if i == lo or x != dst[o]:
+            if o >= lo:
+                count[o] = run
+            o += 1
+            dst[o] = x
+            run = 0
+        run += 1
+    if k > 0:
+        count[o] = run
+    end[v] = wp.int64(o + 1)
 
 
 @wp.kernel
-def write_rings(
-    fstart: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's corners
-    ring: wp.array(dtype=wp.int32),  # In: (6M,) sorted neighbours with repeats (gather_rings)
-    start: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's distinct neighbours
-    dst: wp.array(dtype=wp.int32),  # Out: (K,) the distinct neighbours, ascending
-    count: wp.array(dtype=wp.int32),  # Out: (K,) the faces on each edge (the repeats)
+def merge_quadrics(
+    first: int,  # In: the collapse of thread 0 (a slice of the pass)
+    cv: wp.array(dtype=wp.int32),  # In: (C,) collapsed vertices v (distinct from every u)
+    cu: wp.array(dtype=wp.int32),  # In: (C,) their survivors u (distinct)
+    quadric: wp.array2d(dtype=wp.float64),  # In/Out: (n, 10) QEM quadrics: Q_u += Q_v (Garland-Heckbert)
 ):
-    v = wp.tid()
-    lo = 2 * int(fstart[v])
-    hi = 2 * int(fstart[v + 1])
-    o = int(start[v]) - 1
-    for i in range(lo, hi):
-        if i == lo or ring[i] != ring[i - 1]:
-            o += 1
-            dst[o] = ring[i]
-            count[o] = 0
-        count[o] = count[o] + 1
+    i = first + wp.tid()
+    v = int(cv[i])
+    u = int(cu[i])
+    for k in range(quadric.shape[1]):
+        quadric[u, k] = quadric[u, k] + quadric[v, k]
+
+
+#: the 10 upper-triangle entries of a symmetric 4 x 4 quadric (``QUADRIC_ENTRIES``)
+vec10d = wp.types.vector(length=10, dtype=wp.float64)
+
+
+@wp.func
+def row10(w: wp.array2d(dtype=wp.float64), f: int):
+    return vec10d(w[f, 0], w[f, 1], w[f, 2], w[f, 3], w[f, 4], w[f, 5], w[f, 6], w[f, 7], w[f, 8], w[f, 9])
+
+
+@wp.kernel
+def plane_sums(
+    first: int,  # In: the vertex of thread 0 (a slice of the pass)
+    fstart: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's corners
+    corner: wp.array(dtype=wp.int32),  # In: (3M,) flat corner indices grouped by vertex, ascending
+    weight: wp.array2d(dtype=wp.float64),  # In: (M, 10) each face's area x p p^T entries (QUADRIC_ENTRIES)
+    quadric: wp.array2d(dtype=wp.float64),  # Out: (n, 10) the sums over the faces at each vertex
+):
+    # Garland-Heckbert: Q_v = sum of the face quadrics at v, added corner slot by corner slot (the faces that have v
+    # as corner 0, in face order, then corner 1, then 2): the float sums numpy's per-slot bincounts give
+    v = first + wp.tid()
+    s0 = vec10d()
+    s1 = vec10d()
+    s2 = vec10d()
+    for k in range(int(fstart[v]), int(fstart[v + 1])):
+        c = int(corner[k])
+        j = c % 3
+        if j == 0:
+            s0 = s0 + row10(weight, c // 3)
+        elif j == 1:
+            s1 = s1 + row10(weight, c // 3)
+        else:
+            s2 = s2 + row10(weight, c // 3)
+    total = ((vec10d() + s0) + s1) + s2
+    for k in range(10):
+        quadric[v, k] = total[k]

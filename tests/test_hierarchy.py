@@ -469,9 +469,9 @@ def test_every_round_is_pairwise_non_conflicting(monkeypatch):
     rounds = []
     select = CollapseRounds.select
 
-    def recording(self, dst, count, start):
-        v, u = select(self, dst, count, start)
-        rounds.append((v, u, start.copy(), dst.copy()))
+    def recording(self, dst, count, start, end):
+        v, u = select(self, dst, count, start, end)
+        rounds.append((v, u, start.copy(), end.copy(), dst.copy()))
         return v, u
 
     monkeypatch.setattr(CollapseRounds, "select", recording)
@@ -479,11 +479,11 @@ def test_every_round_is_pairwise_non_conflicting(monkeypatch):
     pos, faces, normals, _ = flat_grid(41)
     build_hierarchy(pos, faces, normals)
     assert len(rounds) > 20
-    for v, u, start, dst in rounds:
+    for v, u, start, end, dst in rounds:
         assert len(np.unique(np.r_[v, u])) == 2 * len(v)
-        ring = lambda x: np.r_[x, dst[start[x] : start[x + 1]]]  # noqa: E731
-        in_ring_v = np.zeros(len(start) - 1, np.int64)
-        in_ring_u = np.zeros(len(start) - 1, np.int64)
+        ring = lambda x: np.r_[x, dst[start[x] : end[x]]]  # noqa: E731
+        in_ring_v = np.zeros(len(end), np.int64)
+        in_ring_u = np.zeros(len(end), np.int64)
         for a, b in zip(v, u):
             in_ring_v[ring(a)] += 1
             in_ring_u[ring(b)] += 1

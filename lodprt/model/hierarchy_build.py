@@ -2,7 +2,8 @@
 ``build_hierarchy``.
 
 Steps: input checks; mesh groups (connected components, split further by ``component``); topology (boundary,
-non-manifold vertices) and Garland-Heckbert quadrics; rounds of parallel half-edge collapses ``v -> u`` (figure 5;
+non-manifold vertices, read from the first round's one-rings) and Garland-Heckbert quadrics (summed per vertex by
+the ``plane_sums`` kernel); rounds of parallel half-edge collapses ``v -> u`` (figure 5;
 ``lodprt.model.hierarchy_rounds``: QEM order, link condition, boundary rules, valence, fold-over (figure 6) and
 sliver tests), each collapse creating the next node (creation number = node id, fine to coarse) with its normal
 cone, bounding radius (figure 7) and error vector (figure 10, ``lodprt.model.hierarchy_attributes``) computed in
@@ -19,11 +20,12 @@ from typing import Callable
 
 import numpy as np
 
+from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, concat_ranges, leaf_layout
 from lodprt.model.hierarchy_attributes import merge_cones
 from lodprt.model.hierarchy_levels import mesh_groups
-from lodprt.model.hierarchy_rounds import QUADRIC_ENTRIES, CollapseRounds
+from lodprt.model.hierarchy_rounds import QUADRIC_ENTRIES, CollapseRounds, KernelThreads, one_rings, warp_view
 
 log = logging.getLogger(__name__)
 
@@ -92,48 +94,75 @@ def _plane_quadrics(q: np.ndarray, planes: np.ndarray, weight: np.ndarray, corne
             q[:, k] += np.bincount(idx, weights=w, minlength=V)
 
 
-def _topology(positions: np.ndarray, work: np.ndarray):
+def _face_sums(q: np.ndarray, planes: np.ndarray, weight: np.ndarray, fstart, corner, threads) -> None:
+    """Set the quadrics ``q`` (V, 10) to the sum of ``weight x plane plane^T`` (planes (F, 4)) over the faces at
+    each vertex (``plane_sums`` on the corner CSR ``fstart``, ``corner``: the sums ``_plane_quadrics`` gives)."""
+    wp = warp()
+    from lodprt.kernels import hierarchy as kh
+
+    w = np.empty((len(planes), len(QUADRIC_ENTRIES)))
+    for k, (r, c) in enumerate(QUADRIC_ENTRIES):
+        np.multiply(weight * planes[:, r], planes[:, c], out=w[:, k])
+    threads.launch(kh.plane_sums, len(q), [warp_view(fstart, wp.int64), warp_view(corner, wp.int32),
+                                           warp_view(w, wp.float64), warp_view(q, wp.float64)], work=fstart)
+
+
+def _boundary_faces(work: np.ndarray, fstart: np.ndarray, corner: np.ndarray, a: np.ndarray, b: np.ndarray):
+    """(K,) the face holding each edge ``a[i] b[i]`` of one face, found among ``a``'s corners."""
+    lo, hi = fstart[a], fstart[a + 1]
+    k = concat_ranges(lo, hi)
+    edge = np.repeat(np.arange(len(a)), hi - lo)
+    f = corner[k] // 3
+    hit = (work[f] == b[edge][:, None]).any(1)
+    return f[hit][np.argsort(edge[hit], kind="stable")]
+
+
+def _topology(positions: np.ndarray, work: np.ndarray, threads: KernelThreads):
     """QEM quadrics (V, 10) (Garland-Heckbert: sum over incident faces of area x p p^T, p = (n, -n.x), plus
     ``BOUNDARY_WEIGHT`` x |e|^2 x the plane through each boundary edge perpendicular to its face), boundary (V,)
-    bool and frozen (V,) bool: vertices on a non-manifold edge (more than two faces) or at a non-manifold boundary
-    vertex (bow tie), which take part in no collapse."""
+    bool, frozen (V,) bool: vertices on a non-manifold edge (more than two faces) or at a non-manifold boundary
+    vertex (bow tie), which take part in no collapse; and the one-rings of ``work`` (``one_rings``: the edges and
+    the faces on each), which the first round uses again."""
     V = len(positions)
     p = positions
     q = np.zeros((V, 10))
     boundary = np.zeros(V, bool)
     frozen = np.zeros(V, bool)
     if not len(work):
-        return q, boundary, frozen
-    cr = np.cross(p[work[:, 1]] - p[work[:, 0]], p[work[:, 2]] - p[work[:, 0]])
+        return q, boundary, frozen, None
+    p0 = p[work[:, 0]]
+    cr = np.cross(p[work[:, 1]] - p0, p[work[:, 2]] - p0)
     dbl = np.linalg.norm(cr, axis=1)
     n = np.divide(cr, dbl[:, None], out=np.zeros_like(cr), where=dbl[:, None] > 0)
     del cr
-    plane = np.concatenate([n, -(n * p[work[:, 0]]).sum(1, keepdims=True)], axis=1)
-    _plane_quadrics(q, plane, 0.5 * dbl, [work[:, 0], work[:, 1], work[:, 2]])
+    plane = np.concatenate([n, -(n * p0).sum(1, keepdims=True)], axis=1)
+    del p0
+    rings = one_rings(work, np.bincount(work.ravel(), minlength=V), threads)
+    fstart, corner, dst, count, start, end = rings
+    _face_sums(q, plane, 0.5 * dbl, fstart, corner, threads)
     del plane, dbl
-    # undirected edges: faces on each, one face of each
-    e = np.sort(np.concatenate([work[:, [0, 1]], work[:, [1, 2]], work[:, [2, 0]]]), axis=1).astype(np.int64)
-    keys = e[:, 0] * V + e[:, 1]
-    del e
-    uk, first, ecount = np.unique(keys, return_index=True, return_counts=True)
-    del keys
-    a, b = uk // V, uk % V
-    once = ecount == 1
-    bcount = np.bincount(np.r_[a[once], b[once]], minlength=V)
+    # undirected edges: the faces on each (the one-rings' counts), one face of each
+    deg = end - start[:-1]
+    src = np.repeat(np.arange(V, dtype=np.int64), deg)
+    at = concat_ranges(start[:-1], end)
+    nb, ecount = dst[at], count[at]
+    del at
+    bcount = np.bincount(src[ecount == 1], minlength=V)
     boundary = bcount > 0
-    frozen[a[ecount > 2]] = frozen[b[ecount > 2]] = True  # non-manifold edge
+    frozen[src[ecount > 2]] = True  # non-manifold edge (both ends: the rings are symmetric)
     frozen |= (bcount != 0) & (bcount != 2)  # non-manifold boundary vertex (bow tie)
+    once = (ecount == 1) & (nb > src)  # each boundary edge a < b once, ordered by (a, b)
     if once.any():
-        a, b = a[once], b[once]
+        a, b = src[once], nb[once].astype(np.int64)
         d = p[b] - p[a]
-        m = np.cross(d, n[first[once] % len(work)])
+        m = np.cross(d, n[_boundary_faces(work, fstart, corner, a, b)])
         lm = np.linalg.norm(m, axis=1)
         m = np.divide(m, lm[:, None], out=np.zeros_like(m), where=lm[:, None] > 0)
         bp = np.concatenate([m, -(m * p[a]).sum(1, keepdims=True)], axis=1)
         _plane_quadrics(q, bp, BOUNDARY_WEIGHT * (d * d).sum(1), [a, b])
     if frozen.any():
         log.info("hierarchy: %d vertices on non-manifold edges or vertices stay uncollapsed", int(frozen.sum()))
-    return q, boundary, frozen
+    return q, boundary, frozen, rings
 
 
 class _Nodes:
@@ -158,23 +187,24 @@ class _Nodes:
         """Record the round's collapses ``v -> u`` (local ids, made in this order): nodes, cones and radii
         (figure 7, merged from the float64 cones standing at u and v), error vectors ``error`` (figure 10)."""
         k = self.count + np.arange(len(v))
+        at = slice(self.count, self.count + len(v))  # the nodes k, consecutive
         cu, cv = st.node[u], st.node[v]
         self.parent[cu] = k
         self.parent[cv] = k
-        self.children[k, 0] = cu
-        self.children[k, 1] = cv
-        self.vertex[k] = st.gid[u]
+        self.children[at, 0] = cu
+        self.children[at, 1] = cv
+        self.vertex[at] = st.gid[u]
         st.node[u] = k
         axis, half = merge_cones(cur["axis"][u], cur["half"][u], cur["axis"][v], cur["half"][v])
         pu, pv = st.pos[u], st.pos[v]
         radius = np.maximum(cur["radius"][u], cur["radius"][v] + np.linalg.norm(pv - pu, axis=1))
         height = 1 + np.maximum(cur["height"][u], cur["height"][v])
         cur["axis"][u], cur["half"][u], cur["radius"][u], cur["height"][u] = axis, half, radius, height
-        self.axis[k] = axis
-        self.half[k] = np.minimum(half + CONE_SLACK, math.pi)
-        self.radius[k] = radius * (1 + 1e-6)  # float32 rounding must not cut a leaf off
-        self.error[k] = error
-        self.nb_count[k] = nb_count
+        self.axis[at] = axis
+        self.half[at] = np.minimum(half + CONE_SLACK, math.pi)
+        self.radius[at] = radius * (1 + 1e-6)  # float32 rounding must not cut a leaf off
+        self.error[at] = error
+        self.nb_count[at] = nb_count
         self.nb_chunks.append(st.gid[nb])
         self.depth = max(self.depth, int(height.max(initial=0)))
         self.count += len(v)
@@ -228,19 +258,21 @@ def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, t
             if _next_phase(st, phases):
                 continue
             break
-        dst, count, start = st.adjacency()
-        if st.n > 64 and np.count_nonzero(st.corners[0][1:] == st.corners[0][:-1]) * 2 > size:
-            cur = st.compact(cur)  # half of the vertices have gone: the rounds cost what the live mesh costs
+        fcount = st.corner_counts()
+        if st.n > 64 and np.count_nonzero(fcount == 0) * 2 > size:
+            used = fcount > 0  # half of the vertices have gone: the rounds cost what the live mesh costs
+            cur = st.compact(cur, used)
+            fcount = fcount[used]
             size = st.n
-            dst, count, start = st.adjacency()
-        v, u = st.select(dst, count, start)
+        dst, count, start, end = st.adjacency(fcount)
+        v, u = st.select(dst, count, start, end)
         if not len(v):
             if _next_phase(st, phases):
                 continue
             break
-        nb_count = start[v + 1] - start[v]
-        nb = dst[concat_ranges(start[v], start[v + 1])]  # v's neighbours before the collapse, sorted
-        del dst, count, start
+        nb_count = end[v] - start[v]
+        nb = dst[concat_ranges(start[v], end[v])]  # v's neighbours before the collapse, sorted
+        del dst, count, start, end
         error = st.errors(v, u)
         st.apply(v, u)
         nodes.add(st, cur, v, u, nb_count, nb, error)
@@ -252,6 +284,28 @@ def _rounds(st: CollapseRounds, nodes: _Nodes, normals, target_base, progress, t
         if progress is not None:
             progress(nodes.count - nodes.V, total)
     return rounds
+
+
+def _build(positions, work, normals, group, seed, phases: int, threads: KernelThreads, *, keep_boundary: bool,
+           split: bool, target_base: int, progress) -> tuple[int, _Nodes]:
+    """The topology, then the rounds (``_rounds``) on ``threads``: the rounds made and the nodes."""
+    V = len(positions)
+    quadric, boundary, frozen, rings = _topology(positions, work, threads)
+    used = np.zeros(V, bool)
+    used[work.ravel()] = True
+    movable = used & ~frozen & ~(boundary if keep_boundary else np.zeros(V, bool))
+    total = int(movable.sum())
+    nodes = _Nodes(V, normals, total)
+    st = CollapseRounds(np.arange(V, dtype=np.int32), positions, quadric, boundary, frozen, movable, group,
+                        np.ascontiguousarray(work), split=split, threads=threads)
+    del quadric, boundary, frozen, movable, group, used
+    if rings is not None:
+        st.prime(rings)  # the topology's one-rings are the first round's
+        del rings
+    if seed is not None:
+        st.seed(seed)
+        del seed
+    return _rounds(st, nodes, normals, target_base, progress, total, phases), nodes
 
 
 def build_hierarchy(
@@ -281,6 +335,8 @@ def build_hierarchy(
     ``method``: ``"rounds"`` (the default) orders the collapses by the rounds' own QEM costs; ``"pymeshlab"``
     replays pymeshlab's chained QEM halvings (``lodprt.model.hierarchy_pymeshlab``, on ``workers`` processes:
     default every core) level by level with the same rounds, collapses and node attributes (docs/HIERARCHY.md).
+    Either way the round kernels run on ``workers`` threads (default every core; ``KernelThreads``): the same
+    hierarchy, bit for bit, on any number.
     """
     t0 = time.perf_counter()
     check_method(method)
@@ -297,20 +353,12 @@ def build_hierarchy(
 
         seed, phases = removal_levels(positions, work, group, target_base=int(target_base),
                                       keep_boundary=keep_boundary, workers=workers)
-    quadric, boundary, frozen = _topology(positions, work)
-    used = np.zeros(V, bool)
-    used[work.ravel()] = True
-    movable = used & ~frozen & ~(boundary if keep_boundary else np.zeros(V, bool))
-    total = int(movable.sum())
-    nodes = _Nodes(V, normals, total)
-    st = CollapseRounds(np.arange(V, dtype=np.int32), positions, quadric, boundary, frozen, movable, group,
-                        np.ascontiguousarray(work), split=component is not None)
-    del quadric, boundary, frozen, movable, group, used
-    if seed is not None:
-        st.seed(seed)
-        del seed
-    levels = _rounds(st, nodes, normals, int(target_base), progress, total, phases)
-    del st
+    threads = KernelThreads(workers)
+    try:
+        levels, nodes = _build(positions, work, normals, group, seed, phases, threads, keep_boundary=keep_boundary,
+                               split=component is not None, target_base=int(target_base), progress=progress)
+    finally:
+        threads.close()
     hier = nodes.hierarchy(levels)
     hier.build_seconds = time.perf_counter() - t0
     hier.method = method

@@ -2,7 +2,8 @@
 ``CollapseRounds``.
 
 A round looks at the whole current mesh at once, with the Warp kernels of ``lodprt.kernels.hierarchy`` on the CPU
-(no per-vertex Python loop): the one-rings and face corners (``adjacency``); every movable vertex ``v`` proposes
+(no per-vertex Python loop; the per-vertex and per-collapse passes sliced over the cores, ``KernelThreads``): the
+one-rings and face corners (``one_rings``, ``adjacency``); every movable vertex ``v`` proposes
 its cheapest legal move ``v -> u`` (Garland-Heckbert QEM cost of ``u``'s position under the summed quadrics, plus
 ``EDGE_WEIGHT |uv|^4``; legal: link condition, valence, boundary rules, fold-over, slivers: docs/HIERARCHY.md);
 proposals are ranked by cost class (``cost_class``: within a factor ``CLASS_STEP``), then by a hash of the
@@ -15,6 +16,10 @@ vertices whenever half of them have gone, so late rounds cost what the small mes
 """
 
 from __future__ import annotations
+
+import concurrent.futures
+import os
+import threading
 
 import numpy as np
 
@@ -33,6 +38,10 @@ CLASS_STEP = 2.0
 
 #: the Warp device of the round kernels (``lodprt.kernels.hierarchy``): the build is host work, next to numpy
 DEVICE = "cpu"
+#: a pass over fewer items runs as one launch (a launch costs tens of microseconds): ``KernelThreads``
+SPLIT_MIN = 8192
+#: slices of a pass per thread, at most (``KernelThreads.launch``)
+SLICES = 4
 
 #: the removal level of a vertex the seeding decimation never removed (above every phase)
 NEVER = np.iinfo(np.int32).max
@@ -64,21 +73,99 @@ def cost_class(cost: np.ndarray) -> np.ndarray:
         return np.floor(np.log(np.maximum(cost, 0.0)) / np.log(CLASS_STEP))
 
 
-def rank_key(cls: np.ndarray, tie: np.ndarray) -> np.ndarray:
-    """(K,) uint64 sort keys ordering moves by cost class (``cost_class``), then by the position hash ``tie``:
-    the class in the top 16 bits (clipped to +-2^15, far beyond the classes float64 costs have), the hash's top 48
-    bits below it (one stable sort instead of a two-key lexsort; equal keys, e.g. duplicated vertices, keep the
-    order of their local ids, which is the same whichever other groups are built alongside)."""
-    c = (np.clip(cls, -(2**15) + 1, 2**15 - 1) + 2**15).astype(np.uint64)
-    return (c << np.uint64(48)) | (tie >> np.uint64(16))
+def class_key(cls: np.ndarray) -> np.ndarray:
+    """(K,) uint16 the cost classes (``cost_class``) as sort keys, clipped to +-(2^15 - 1) (far beyond the classes
+    float64 costs have; -inf, a cost <= 0, sorts first).
+
+    The rank of a move is its class, then the top 48 bits of its position hash ``tie``, then its local id (equal
+    keys, e.g. duplicated vertices, keep the order of their local ids, which is the same whichever other groups are
+    built alongside): ``CollapseRounds.hash_order`` holds the vertices sorted by the last two once (positions never
+    move, compaction keeps the order of local ids), so a round's ranking is one stable sort of the proposals, taken
+    in that order, by these keys (a radix sort of 16-bit keys)."""
+    return (np.clip(cls, -(2**15) + 1, 2**15 - 1) + 2**15).astype(np.uint16)
 
 
-def _wrap(a: np.ndarray, dtype):
+def warp_view(a: np.ndarray, dtype):
     """A Warp view of the CPU array ``a`` (bool viewed as uint8; contiguous, no copy when it already is)."""
     a = np.ascontiguousarray(a)
     if a.dtype == bool:
         a = a.view(np.uint8)
     return warp().array(a, dtype=dtype, device=DEVICE, copy=False)
+
+
+def one_rings(faces: np.ndarray, fcount: np.ndarray, threads: "KernelThreads") -> tuple:
+    """The face corners and one-rings of ``faces`` (M, 3) int32 (``fcount`` (n,) the faces at each vertex):
+    fstart (n + 1,) int64 and corner (3M,) int32, the flat corner indices around each vertex, ascending (a CSR);
+    dst (6M,) int32 each vertex's distinct neighbours, ascending, and count (6M,) int32 the faces on each of those
+    edges, in a padded CSR: vertex ``v``'s are at ``start[v]:end[v]``, start (n + 1,) int64 twice its corner start,
+    end (n,) int64 (``lodprt.kernels.hierarchy``: ``fill_corners``, one thread; ``gather_rings``, sliced over
+    ``threads``)."""
+    wp = warp()
+    from lodprt.kernels import hierarchy as kh
+
+    n, flat = len(fcount), faces.ravel()
+    fstart = np.zeros(n + 1, np.int64)
+    np.cumsum(fcount, out=fstart[1:])
+    corner = np.empty(len(flat), np.int32)
+    wfstart, wcorner = warp_view(fstart, wp.int64), warp_view(corner, wp.int32)
+    wp.launch(kh.fill_corners, dim=len(flat), device=DEVICE, inputs=[
+        warp_view(flat, wp.int32), wfstart, warp_view(np.zeros(n, np.int32), wp.int32), wcorner])
+    dst = np.empty(2 * len(flat), np.int32)
+    count = np.empty(len(dst), np.int32)
+    end = np.empty(n, np.int64)
+    threads.launch(kh.gather_rings, n, [warp_view(faces, wp.int32), wfstart, wcorner, warp_view(dst, wp.int32),
+                                        warp_view(count, wp.int32), warp_view(end, wp.int64)], work=fstart)
+    return fstart, corner, dst, count, 2 * fstart, end
+
+
+class KernelThreads:
+    """The threads one pass of a per-vertex or per-collapse round kernel is sliced over (a CPU launch releases the
+    GIL, so the slices run at once): this thread and ``workers - 1`` pool threads (``workers`` None: every core
+    this process may use). Each slice is a launch of ``dim`` ``b - a`` with ``first = a`` (the kernel's first
+    argument); the outputs are what one launch gives, since each thread writes only its own items' outputs."""
+
+    def __init__(self, workers: int | None):
+        if workers is None:
+            workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        self.workers = max(1, int(workers))
+        self.pool = concurrent.futures.ThreadPoolExecutor(self.workers - 1) if self.workers > 1 else None
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+            self.pool = None
+
+    def launch(self, kernel, dim: int, inputs: list, work: np.ndarray | None = None) -> None:
+        """``kernel`` over items ``0..dim-1`` (``inputs`` after ``first``), in slices of about equal ``work``
+        (cumulative (dim + 1,), e.g. the corner CSR start; None: equal counts), ``SLICES`` per thread (each thread
+        takes the next slice when it is done with one: a core shared with another process does fewer); one slice
+        below ``SPLIT_MIN`` items."""
+        wp = warp()
+        parts = 1
+        if self.pool is not None and dim >= SPLIT_MIN:
+            parts = min(SLICES * self.workers, max(self.workers, dim // SPLIT_MIN))
+        if work is None:
+            cuts = np.linspace(0, dim, parts + 1).astype(np.int64)
+        else:
+            cuts = np.searchsorted(work[: dim + 1], np.linspace(0, work[dim], parts + 1)).astype(np.int64)
+            cuts[0], cuts[-1] = 0, dim
+        todo = iter([(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:]) if b > a])
+        lock = threading.Lock()
+
+        def drain():
+            while True:
+                with lock:
+                    ab = next(todo, None)
+                if ab is None:
+                    return
+                wp.launch(kernel, dim=ab[1] - ab[0], device=DEVICE, inputs=[ab[0]] + inputs)
+
+        futures = [self.pool.submit(drain) for _ in range(self.workers - 1)] if parts > 1 else []
+        try:
+            drain()
+        finally:
+            for f in futures:
+                f.result()
 
 
 class CollapseRounds:
@@ -89,17 +176,22 @@ class CollapseRounds:
     collapse), ``group``, ``node`` the hierarchy node standing there. Faces ``faces`` (M, 3) int32 in local ids,
     never degenerate."""
 
-    def __init__(self, gid, pos, quadric, boundary, frozen, movable, group, faces, split: bool):
+    def __init__(self, gid, pos, quadric, boundary, frozen, movable, group, faces, split: bool,
+                 threads: "KernelThreads | None" = None):
         self.split = split  # whether vertices of different groups may share an edge
         self.gid, self.pos, self.quadric = gid, pos, quadric
         self.boundary, self.frozen, self.movable, self.group = boundary, frozen, movable, group
         self.node = gid.copy()
         self.faces = faces
         self.tie = position_hash(pos)
+        # the local ids sorted by the top 48 bits of their hash, equal ones by id: the rank's tie-break (class_key)
+        self.hash_order = np.argsort(self.tie >> np.uint64(16), kind="stable").astype(np.int32)
+        self.threads = threads if threads is not None else KernelThreads(None)
         self.level = None  # (n,) int32 removal level of a seeded build (``seed``), None for the plain rounds
         self.phase = None  # the level being replayed (None: every movable vertex may move anywhere)
         self.finished = None  # (G,) bool the groups ``finish_groups`` has settled
         self.corners = None  # the round's face corners around each vertex (CSR start, corners), set by ``adjacency``
+        self.primed = None  # (faces, one_rings of them) made before the first round (``prime``)
 
     def seed(self, level: np.ndarray) -> None:
         """Seed the rounds with an external decimation order (``build_hierarchy(method="pymeshlab")``): ``level``
@@ -119,49 +211,40 @@ class CollapseRounds:
         return len(self.gid)
 
     # -----------------------------------------------------------------------------------------------------------
-    def compact(self, extra: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Keep only the vertices some face uses (renumbered in order); ``extra`` per-vertex arrays follow."""
-        used = np.zeros(self.n, bool)
-        used[self.faces.ravel()] = True
+    def compact(self, extra: dict[str, np.ndarray], used: np.ndarray) -> dict[str, np.ndarray]:
+        """Keep only the vertices some face uses (``used`` (n,) bool: ``corner_counts() > 0``), renumbered in
+        order; ``extra`` per-vertex arrays follow."""
         new = np.cumsum(used, dtype=np.int64).astype(np.int32) - 1
         self.faces = new[self.faces]
         for name in ("gid", "pos", "quadric", "tie", "boundary", "frozen", "movable", "group", "node"):
             setattr(self, name, getattr(self, name)[used])
+        self.hash_order = new[self.hash_order[used[self.hash_order]]]  # the same order of the vertices kept
         if self.level is not None:
             self.level = self.level[used]
         return {k: a[used] for k, a in extra.items()}
 
-    def adjacency(self):
-        """The one-rings of the current faces: target (K,) int32 neighbours, ascending per vertex, the number of
-        faces on each edge (K,) int32 and the CSR start of every vertex (n + 1,) int64; the face corners around
-        each vertex (``vertex_corners``'s CSR, ascending) stay in ``corners`` for the round
-        (``lodprt.kernels.hierarchy``: ``fill_corners``, ``gather_rings``, ``write_rings``)."""
-        wp = warp()
-        from lodprt.kernels import hierarchy as kh
-
-        n, flat = self.n, self.faces.ravel()
-        fstart = np.zeros(n + 1, np.int64)
-        np.cumsum(np.bincount(flat, minlength=n), out=fstart[1:])
-        corner = np.empty(len(flat), np.int32)
-        wfstart, wcorner, wfaces = _wrap(fstart, wp.int64), _wrap(corner, wp.int32), _wrap(self.faces, wp.int32)
-        wp.launch(kh.fill_corners, dim=len(flat), device=DEVICE, inputs=[
-            _wrap(flat, wp.int32), wfstart, _wrap(np.zeros(n, np.int32), wp.int32), wcorner])
+    def adjacency(self, fcount: np.ndarray):
+        """The one-rings of the current faces (``fcount`` (n,) the faces at each vertex, ``corner_counts``):
+        ``one_rings``'s dst, count, start and end; its corners stay in ``corners`` for the round. The rings
+        ``prime`` handed over are used when the faces are still the ones they were made of."""
+        if self.primed is not None and self.primed[0] is self.faces:
+            fstart, corner, dst, count, start, end = self.primed[1]
+        else:
+            fstart, corner, dst, count, start, end = one_rings(self.faces, fcount, self.threads)
+        self.primed = None
         self.corners = (fstart, corner)
-        ring = np.empty(2 * len(flat), np.int32)
-        distinct = np.empty(n, np.int32)
-        wring = _wrap(ring, wp.int32)
-        wp.launch(kh.gather_rings, dim=n, device=DEVICE, inputs=[wfaces, wfstart, wcorner, wring,
-                                                                   _wrap(distinct, wp.int32)])
-        start = np.zeros(n + 1, np.int64)
-        np.cumsum(distinct, out=start[1:])
-        dst = np.empty(int(start[-1]), np.int32)
-        count = np.empty(len(dst), np.int32)
-        wp.launch(kh.write_rings, dim=n, device=DEVICE, inputs=[wfstart, wring, _wrap(start, wp.int64),
-                                                                  _wrap(dst, wp.int32), _wrap(count, wp.int32)])
-        return dst, count, start
+        return dst, count, start, end
+
+    def prime(self, rings: tuple) -> None:
+        """Hand over ``one_rings(self.faces, ...)``, made already (the topology's), for the first round."""
+        self.primed = (self.faces, rings)
+
+    def corner_counts(self) -> np.ndarray:
+        """(n,) int64 the faces at each vertex (0: no face uses it any more)."""
+        return np.bincount(self.faces.ravel(), minlength=self.n)
 
     # -----------------------------------------------------------------------------------------------------------
-    def select(self, dst, count, start):
+    def select(self, dst, count, start, end):
         """This round's collapses: (v, u) local ids (C,) of pairwise independent legal moves, in the order of
         their costs (rule H-R; module docstring), on the round's ``adjacency``.
 
@@ -183,26 +266,28 @@ class CollapseRounds:
         cost = np.empty(n)
         level = self.level if self.level is not None else np.zeros(n, np.int32)
         phase = -1 if self.phase is None else int(self.phase)
-        wp.launch(kh.best_moves, dim=n, device=DEVICE, inputs=[
-            _wrap(self.pos, wp.float64), _wrap(self.quadric, wp.float64), _wrap(self.faces, wp.int32),
-            _wrap(self.due(), wp.uint8), _wrap(self.frozen, wp.uint8), _wrap(self.boundary, wp.uint8),
-            _wrap(self.group, wp.int32), _wrap(level, wp.int32), phase, int(self.split), _wrap(start, wp.int64),
-            _wrap(dst, wp.int32), _wrap(count, wp.int32), _wrap(self.corners[0], wp.int64),
-            _wrap(self.corners[1], wp.int32), EDGE_WEIGHT, FOLD_COS, SLIVER, MAX_VALENCE,
-            _wrap(np.empty(len(dst)), wp.float64), _wrap(best, wp.int64), _wrap(cost, wp.float64)])
-        lv = np.flatnonzero(best >= 0)
+        self.threads.launch(kh.best_moves, n, [
+            warp_view(self.pos, wp.float64), warp_view(self.quadric, wp.float64), warp_view(self.faces, wp.int32),
+            warp_view(self.due(), wp.uint8), warp_view(self.frozen, wp.uint8), warp_view(self.boundary, wp.uint8),
+            warp_view(self.group, wp.int32), warp_view(level, wp.int32), phase, int(self.split), warp_view(start, wp.int64),
+            warp_view(end, wp.int64), warp_view(dst, wp.int32), warp_view(count, wp.int32), warp_view(self.corners[0], wp.int64),
+            warp_view(self.corners[1], wp.int32), EDGE_WEIGHT, FOLD_COS, SLIVER, MAX_VALENCE,
+            warp_view(np.empty(len(dst)), wp.float64), warp_view(best, wp.int64), warp_view(cost, wp.float64)],
+            work=self.corners[0])
+        lv = self.hash_order[best[self.hash_order] >= 0]  # the proposals, in position-hash order (``class_key``)
         if not len(lv):
             return np.zeros(0, np.int32), np.zeros(0, np.int32)
         target = np.full(n, -1, np.int32)
         target[lv] = dst[best[lv]]
         cls = np.full(n, np.inf)
         cls[lv] = cost_class(cost[lv])
-        order = lv[np.argsort(rank_key(cls[lv], self.tie[lv]), kind="stable")].astype(np.int32)
+        order = lv[np.argsort(class_key(cls[lv]), kind="stable")].astype(np.int32)
         made = np.zeros(len(order), np.uint8)
         wp.launch(kh.greedy_select, dim=1, device=DEVICE, inputs=[
-            _wrap(order, wp.int32), _wrap(target, wp.int32), _wrap(cls, wp.float64), _wrap(start, wp.int64),
-            _wrap(dst, wp.int32), _wrap(np.zeros(n, np.uint8), wp.uint8), _wrap(np.zeros(n, np.uint8), wp.uint8),
-            _wrap(np.full(n, np.inf), wp.float64), _wrap(np.full(n, np.inf), wp.float64), _wrap(made, wp.uint8)])
+            warp_view(order, wp.int32), warp_view(target, wp.int32), warp_view(cls, wp.float64), warp_view(start, wp.int64),
+            warp_view(end, wp.int64), warp_view(dst, wp.int32), warp_view(np.zeros(n, np.uint8), wp.uint8),
+            warp_view(np.zeros(n, np.uint8), wp.uint8), warp_view(np.full(n, np.inf), wp.float64),
+            warp_view(np.full(n, np.inf), wp.float64), warp_view(made, wp.uint8)])
         v = order[made.view(bool)]
         o = np.lexsort((self.tie[v], cost[v]))
         return v[o], target[v[o]]
@@ -214,10 +299,9 @@ class CollapseRounds:
         from lodprt.kernels import hierarchy as kh
 
         out = np.zeros((len(v), 3))
-        if len(v):
-            wp.launch(kh.collapse_errors, dim=len(v), device=DEVICE, inputs=[
-                _wrap(self.pos, wp.float64), _wrap(self.faces, wp.int32), _wrap(self.corners[0], wp.int64),
-                _wrap(self.corners[1], wp.int32), _wrap(v, wp.int32), _wrap(u, wp.int32), _wrap(out, wp.float64)])
+        self.threads.launch(kh.collapse_errors, len(v), [
+            warp_view(self.pos, wp.float64), warp_view(self.faces, wp.int32), warp_view(self.corners[0], wp.int64),
+            warp_view(self.corners[1], wp.int32), warp_view(v, wp.int32), warp_view(u, wp.int32), warp_view(out, wp.float64)])
         return out
 
     # -----------------------------------------------------------------------------------------------------------
@@ -229,7 +313,12 @@ class CollapseRounds:
         f = to[self.faces]
         keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
         self.faces = f[keep]
-        self.quadric[u] += self.quadric[v]  # the u of one round are distinct
+        wp = warp()
+        from lodprt.kernels import hierarchy as kh
+
+        # Q_u += Q_v (the u and v of one round are all distinct; ``merge_quadrics``)
+        self.threads.launch(kh.merge_quadrics, len(v), [warp_view(v, wp.int32), warp_view(u, wp.int32),
+                                                         warp_view(self.quadric, wp.float64)])
         self.movable[v] = False
         self.corners = None
 
