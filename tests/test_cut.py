@@ -109,8 +109,9 @@ def test_completion_of_constant_and_linear_fields(bunny_floor, bunny_hierarchy):
 
     h = bunny_hierarchy
     plan = CompletionPlan(h, bunny_floor.positions, bunny_floor.normals)
-    np.testing.assert_allclose(plan.weights.sum(1), 1.0, atol=1e-12)
-    assert (plan.weights >= 0).all() and np.isfinite(plan.weights).all()
+    sums = np.add.reduceat(plan.ring_w.astype(np.float64), plan.ring_ptr[:-1])  # every ring has a neighbour
+    np.testing.assert_allclose(sums, 1.0, atol=1e-6)  # float32 weights
+    assert (plan.ring_w >= 0).all() and np.isfinite(plan.ring_w).all()
     base = Cut.base(h, bunny_floor.faces)
     ids = np.unique(h.vertex[base.active])
     const = plan.complete(ids, np.full((len(ids), 1, 4), 0.37), bunny_floor.num_vertices)

@@ -63,9 +63,9 @@ def test_detail_bound_holds_the_brute_force_maximum(case):
         for k in subtree(h, int(node)):
             if k >= V:  # the collapse of node k: T-15's residual at the vertex it removed
                 m = k - V
-                r = int(plan.ring_len[m])
-                res = c[plan.vertex[m]].astype(np.float64) - (plan.weights[m, :r, None, None]
-                                                               * c[plan.neighbours[m, :r]]).sum(0)
+                ring, weights = plan.ring(m)
+                res = c[plan.vertex[m]].astype(np.float64) - (weights[:, None, None].astype(np.float64)
+                                                               * c[ring]).sum(0)
                 worst = max(worst, float(np.abs(res @ y.T).max()))
             else:  # a leaf: its step to each original neighbour
                 for q in neighbours[k]:

@@ -21,9 +21,10 @@ takes over, in this order:
     Shepard     w_j = 1 / max(|p - q_j|, tiny)^2  (always positive; a single neighbour is copied)
 
 Weights are normalised to sum 1, so a ring of equal coefficients completes to exactly those. Nothing here is NaN.
-The weights depend on geometry only: ``CompletionPlan`` computes them once per hierarchy; ``complete`` then fills
-one sample in "waves" (a vertex's wave is one more than the highest wave among its neighbours), vectorised per
-wave.
+The weights depend on geometry only: ``CompletionPlan`` computes them once per hierarchy (float64 maths, stored as
+float32 in CSR rings with int32 neighbour ids: memory follows the real ring sizes); ``complete`` then fills one
+sample in "waves" (a vertex's wave is one more than the highest wave among its neighbours), vectorised per wave
+in chunks of rows, in float64 or float32.
 """
 
 from __future__ import annotations
@@ -33,8 +34,10 @@ import numpy as np
 from lodprt.model.hierarchy import Hierarchy
 
 RULE_T15, RULE_MEAN_VALUE, RULE_SHEPARD, RULE_BOUNDARY = 0, 1, 2, 3
-#: rows of rings weighed at once (memory is CHUNK x the chunk's largest ring)
+#: rows of rings weighed, waved or completed at once (memory is CHUNK x the chunk's largest ring, or its entries)
 CHUNK = 8192
+#: padded ring entries weighed at once (a chunk of rows with large rings holds fewer rows)
+RING_ENTRIES = 16 * CHUNK
 RULE_NAMES = ("T-15 cotangent", "mean value", "Shepard", "boundary")
 #: an angular gap in a sorted ring at least this close to 180 degrees (radians) makes it an open boundary ring
 GAP_SLACK = 1e-6
@@ -135,63 +138,135 @@ def ring_weights(p: np.ndarray, ring: np.ndarray, mask: np.ndarray, normal: np.n
     return w, order, rule
 
 
+def as_rows(rows, M: int) -> np.ndarray:
+    """Row ids from a slice of M rows (no (M,) array made) or ids."""
+    return np.arange(*rows.indices(M)) if isinstance(rows, slice) else np.asarray(rows)
+
+
+def ring_rows(ptr: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For CSR row offsets ``ptr`` (M+1,) and some rows (a slice or (K,) ids): the flat indices of those rows'
+    entries (in row order), the rows that have any entry (their positions in ``rows``) and where each of those
+    starts in the flat indices (for ``np.<ufunc>.reduceat``)."""
+    rows = as_rows(rows, len(ptr) - 1)
+    first, lens = ptr[rows], ptr[rows + 1] - ptr[rows]
+    filled = np.flatnonzero(lens > 0)
+    seg = np.cumsum(lens) - lens
+    flat = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(first - seg, lens)
+    return flat, filled, seg[filled]
+
+
+def wave_numbers(vertex: np.ndarray, ptr: np.ndarray, ids: np.ndarray, num_vertices: int) -> np.ndarray:
+    """The wave of every collapse row (M,) int32: 1 + the highest wave among the ring vertices of row m that a
+    later row removed (vertices never removed, or removed by row m or before, count 0), as a loop over the rows
+    from the last to the first would give. A ring holds the vertices alive just before its collapse, so rows
+    depend on later rows only (a DAG): blocks of ``CHUNK`` rows, from the last back, each iterated Jacobi-style
+    (``np.maximum.reduceat`` over its CSR rings) until nothing changes, the later blocks' waves already final;
+    as many sweeps as the longest chain of dependent rows inside a block, and memory for one block only."""
+    M = len(vertex)
+    removed = np.full(num_vertices, M, np.int32)  # the row that removed each vertex; M: never
+    removed[vertex] = np.arange(M, dtype=np.int32)
+    wave_v = np.zeros(num_vertices + 1, np.int32)  # per vertex, 0 until its row is settled; the last one stays 0
+    for hi in range(M, 0, -CHUNK):
+        lo = max(hi - CHUNK, 0)
+        flat, filled, seg = ring_rows(ptr, slice(lo, hi))
+        q = ids[flat]
+        row = np.repeat(np.arange(lo, hi, dtype=np.int32), np.diff(ptr[lo:hi + 1]))
+        q = np.where(removed[q] > row, q, num_vertices)  # read as 0: not removed by a later row
+        v, new = vertex[lo:hi], np.ones(hi - lo, np.int32)
+        while len(flat):
+            new[filled] = 1 + np.maximum.reduceat(wave_v[q], seg)
+            if np.array_equal(new, wave_v[v]):
+                break
+            wave_v[v] = new
+        wave_v[v] = new
+    return wave_v[vertex]
+
+
 class CompletionPlan:
-    """Geometry-only part of completion for one hierarchy: who completes whom, with which weights, in which wave."""
+    """Geometry-only part of completion for one hierarchy: who completes whom, with which weights, in which wave.
+
+    Row m is the collapse of node ``V + m``: it removed ``vertex[m]``, whose ring (sorted as ``ring_weights``
+    returns it) is ``ring_ids[ring_ptr[m]:ring_ptr[m + 1]]`` (int32) with the T-15 weights ``ring_w`` (float32)
+    at the same places: memory follows the real ring sizes (CSR), not the largest ring.
+    """
 
     def __init__(self, h: Hierarchy, positions: np.ndarray, normals: np.ndarray):
         self.h = h
         V = h.num_vertices
         internal = np.arange(V, h.num_nodes)
-        self.vertex = h.vertex[h.children[internal, 1]].astype(np.int64)  # the vertex each collapse removed
+        self.vertex = h.vertex[h.children[internal, 1]].astype(np.int32)  # the vertex each collapse removed
         offs = h.neighbour_offsets
-        counts = (offs[internal + 1] - offs[internal]).astype(np.int64)
-        R = int(counts.max()) if len(counts) else 1
+        counts = np.diff(offs[V:]).astype(np.int64)
         M = len(internal)
-        p = np.asarray(positions, np.float64)
-        nrm = np.asarray(normals, np.float64)
-        self.neighbours = np.repeat(self.vertex[:, None], R, axis=1)
-        self.weights = np.zeros((M, R))
+        self.ring_len = counts.astype(np.int32)  # real neighbours per row
+        self.ring_ptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+        self.ring_ids = np.empty(int(self.ring_ptr[-1]), np.int32)
+        self.ring_w = np.empty(len(self.ring_ids), np.float32)
         self.rule = np.zeros(M, np.int8)
-        # rings padded to the largest ring of their chunk (rows sorted by ring size): bounded memory
+        p, nrm = np.asarray(positions), np.asarray(normals)
+        # rings padded to the largest ring of their chunk (rows sorted by ring size), at most CHUNK rows and
+        # RING_ENTRIES padded entries a chunk: bounded memory, however large the largest ring
         by_size = np.argsort(counts, kind="stable")
-        for start in range(0, M, CHUNK):
-            rows = by_size[start : start + CHUNK]
-            r = int(counts[rows].max())
+        start = 0
+        while start < M:
+            r = max(int(counts[by_size[min(start + CHUNK, M) - 1]]), 1)
+            rows = by_size[start : start + min(CHUNK, max(RING_ENTRIES // r, 1))]
+            start += len(rows)
+            r = max(int(counts[rows].max()), 1)
             mask = np.arange(r)[None, :] < counts[rows, None]
-            idx = np.repeat(self.vertex[rows, None], r, axis=1)
-            first = offs[internal[rows]]
-            take = first[:, None] + np.arange(r)[None, :]
+            v = self.vertex[rows]
+            idx = np.repeat(v[:, None], r, axis=1)
+            take = offs[internal[rows]][:, None] + np.arange(r)[None, :]
             idx[mask] = h.neighbours[take[mask]]
-            w, order, rule = ring_weights(p[self.vertex[rows]], p[idx], mask, nrm[self.vertex[rows]])
-            self.neighbours[rows, :r] = np.take_along_axis(idx, order, axis=1)
-            self.weights[rows, :r] = w
+            f64 = lambda a: a.astype(np.float64)  # noqa: E731
+            w, order, rule = ring_weights(f64(p[v]), f64(p[idx]), mask, f64(nrm[v]))
+            at = (self.ring_ptr[rows][:, None] + np.arange(r)[None, :])[mask]  # sorted: real neighbours first
+            self.ring_ids[at] = np.take_along_axis(idx, order, axis=1)[mask]
+            self.ring_w[at] = w[mask]
             self.rule[rows] = rule
-        self.neighbours = self.neighbours[:, : max(R, 1)]
-        self.ring_len = counts  # real neighbours per row: sorted rows keep them first
         # waves: neighbours of a collapsed vertex were removed later (or never); coarse first
-        wave = [0] * V
-        lens = counts.tolist()
-        nb = self.neighbours.tolist()
-        vlist = self.vertex.tolist()
-        for m in range(M - 1, -1, -1):
-            wave[vlist[m]] = 1 + max((wave[q] for q in nb[m][: lens[m]]), default=0)
-        wave = np.asarray(wave, np.int64)
-        self.wave = wave[self.vertex]
-        self.by_wave = np.argsort(self.wave, kind="stable")
+        self.wave = wave_numbers(self.vertex, self.ring_ptr, self.ring_ids, V)
+        self.by_wave = np.argsort(self.wave, kind="stable").astype(np.int32)
         self.wave_ptr = np.searchsorted(self.wave[self.by_wave], np.arange(self.wave.max() + 2 if M else 1))
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the plan's own arrays (the hierarchy it refers to not counted)."""
+        return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
+
+    def ring(self, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """Row m's ring: neighbour ids (int32) and their T-15 weights (float32), in ``ring_weights``' order."""
+        lo, hi = self.ring_ptr[m], self.ring_ptr[m + 1]
+        return self.ring_ids[lo:hi], self.ring_w[lo:hi]
+
+    def interpolate(self, c: np.ndarray, rows) -> np.ndarray:
+        """T-15 ``sum_j w_j c[q_j]`` over the rings of plan ``rows`` (a slice or ids) for per-vertex values ``c``
+        (V, K): (len(rows), K) in ``c``'s precision, at least float32; 0 for an empty ring."""
+        rows = as_rows(rows, len(self.vertex))
+        flat, filled, seg = ring_rows(self.ring_ptr, rows)
+        dt = np.result_type(c.dtype, np.float32)
+        out = np.zeros((len(rows), c.shape[1]), dt)
+        if len(flat):
+            terms = self.ring_w[flat, None].astype(dt) * c[self.ring_ids[flat]]
+            out[filled] = np.add.reduceat(terms, seg, axis=0)
+        return out
 
     def rule_fractions(self) -> dict[str, float]:
         counts = np.bincount(self.rule, minlength=len(RULE_NAMES)) / max(len(self.rule), 1)
         return {name: float(c) for name, c in zip(RULE_NAMES, counts)}
 
-    def complete(self, ids: np.ndarray, coeffs: np.ndarray, num_vertices: int, *, cut_nodes=None, dark=None) -> np.ndarray:
-        """(V, ...) float64 coefficients of every vertex from the kept ``ids`` (K,) and their ``coeffs`` (K, ...).
+    def complete(self, ids: np.ndarray, coeffs: np.ndarray, num_vertices: int, *, cut_nodes=None, dark=None,
+                 dtype=np.float64) -> np.ndarray:
+        """(V, ...) coefficients of every vertex in ``dtype`` (float64 by default; the weights and every gather
+        in it too) from the kept ``ids`` (K,) and their ``coeffs`` (K, ...).
 
         With the sample's cut (``cut_nodes`` (K,) and their ``dark`` flags), every vertex under a dark node is
         exactly 0 (all its leaves face away or lie in shadow: no radiance), and the others are completed from
         ring neighbours that are not dark (weights renormalised; all of them when every neighbour is dark).
+        The weights of a ring are renormalised to sum 1 in ``dtype``, so equal neighbours complete exactly.
         """
-        out = np.zeros((num_vertices,) + coeffs.shape[1:], np.float64)
+        coeffs = np.asarray(coeffs)
+        out = np.zeros((num_vertices,) + coeffs.shape[1:], dtype)
         out[ids] = coeffs
         have = np.zeros(num_vertices, bool)
         have[ids] = True
@@ -208,16 +283,30 @@ class CompletionPlan:
             dark_v = is_dark[active_ancestors(self.h, active)]
             out[dark_v & ~have] = 0.0
             have |= dark_v
+        flat_out = out.reshape(num_vertices, -1)
         for w in range(1, len(self.wave_ptr) - 1):
             rows = self.by_wave[self.wave_ptr[w] : self.wave_ptr[w + 1]]
             rows = rows[~have[self.vertex[rows]]]
-            if not len(rows):
-                continue
-            r = max(int(self.ring_len[rows].max()), 1)  # no work on the padding of larger rings
-            nb = self.neighbours[rows, :r]
-            weights = self.weights[rows, :r] * ~dark_v[nb]
-            total = weights.sum(1, keepdims=True)
-            weights = np.where(total > 0, weights / np.where(total > 0, total, 1.0), self.weights[rows, :r])
-            out[self.vertex[rows]] = np.einsum("mr,mr...->m...", weights, out[nb])  # T-15
+            # a ring holds vertices of earlier waves only: chunks of one wave never read each other's writes
+            for start in range(0, len(rows), CHUNK):
+                part = rows[start : start + CHUNK]
+                flat_out[self.vertex[part]] = self.blend(flat_out, part, dark_v)  # T-15
             have[self.vertex[rows]] = True
+        return out
+
+    def blend(self, c: np.ndarray, rows: np.ndarray, dark_v: np.ndarray) -> np.ndarray:
+        """T-15 for plan ``rows`` from the values ``c`` (V, K) of their rings, in ``c``'s dtype: weights of dark
+        neighbours (``dark_v`` (V,) bool) dropped and the rest renormalised (all of them when all are dark)."""
+        flat, filled, seg = ring_rows(self.ring_ptr, rows)
+        out = np.zeros((len(rows), c.shape[1]), c.dtype)
+        if not len(flat):
+            return out
+        nb = self.ring_ids[flat]
+        w = self.ring_w[flat].astype(c.dtype)
+        lit = np.where(dark_v[nb], 0, w)
+        total_lit = np.add.reduceat(lit, seg)
+        use_lit = np.repeat(total_lit > 0, np.diff(np.r_[seg, len(flat)]))
+        w = np.where(use_lit, lit, w)
+        w /= np.repeat(np.where(total_lit > 0, total_lit, np.add.reduceat(w, seg)), np.diff(np.r_[seg, len(flat)]))
+        out[filled] = np.add.reduceat(w[:, None] * c[nb], seg, axis=0)
         return out

@@ -32,25 +32,35 @@ def detail_bounds(h, c: np.ndarray, white: float, plan, rings: tuple, levels: li
     float32. (a) is zero where the completed field is linear (T-15 has linear precision); (b) is one edge's step,
     small on smooth fields and large at a shadow or highlight boundary that runs next to the subtree (between two
     subtrees, where neither's own collapses see it). One number per channel keeps the per-frame read to a few
-    values a node."""
+    values a node. Both terms are made ``CHUNK`` collapses or leaves at a time (no copy of ``c``)."""
     V, N = h.num_vertices, h.num_nodes
     _, C, n = c.shape
     if N == V:
         return np.zeros((0, C), np.float32)
     c0, c1 = h.children[:, 0], h.children[:, 1]
-    ring_v, ring_q, starts = rings
-    c = c.reshape(V, C * n) / np.float32(white)
+    c = c.reshape(V, C * n)
     d = np.zeros((N, C), np.float32)
-    if len(ring_v):  # leaves: the largest step to an original neighbour (a shadow edge between subtrees)
-        d[ring_v[starts]] = np.maximum.reduceat(radiance_bound(c[ring_v] - c[ring_q], C, n), starts, axis=0)
+    leaf_steps(d, c, np.float32(white), rings, C, n)
     for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
         rows = slice(start, min(start + CHUNK, N - V))
-        r = max(int(plan.ring_len[rows].max()), 1)
-        interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
-        d[V + rows.start:V + rows.stop] = radiance_bound(c[plan.vertex[rows]] - interp, C, n)  # T-15 residual
+        res = (c[plan.vertex[rows]] - plan.interpolate(c, rows)) / np.float32(white)  # T-15 residual
+        d[V + rows.start:V + rows.stop] = radiance_bound(res, C, n)
     for nodes in levels:
         d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
     return d[V:]
+
+
+def leaf_steps(d: np.ndarray, c: np.ndarray, white, rings: tuple, C: int, n: int) -> None:
+    """S-2 (b) into ``d`` (N, C) at the leaves: the largest ``radiance_bound`` of (C(v) - C(q)) / white over the
+    original neighbours q of each leaf v (``rings = leaf_rings(faces)``, c (V, C * n)), ``CHUNK`` leaves (whole
+    runs) at a time, so the largest (edges, C * n) array has a chunk's edges."""
+    ring_v, ring_q, starts = rings
+    ends = np.r_[starts[1:], len(ring_v)]
+    for a in range(0, len(starts), CHUNK):
+        b = min(a + CHUNK, len(starts))
+        lo, hi = int(starts[a]), int(ends[b - 1])
+        step = c[ring_v[lo:hi]] / white - c[ring_q[lo:hi]] / white
+        d[ring_v[starts[a:b]]] = np.maximum.reduceat(radiance_bound(step, C, n), starts[a:b] - lo, axis=0)
 
 
 def detail_mean_square(h, c: np.ndarray, white: float, plan, levels: list) -> np.ndarray:
@@ -64,13 +74,12 @@ def detail_mean_square(h, c: np.ndarray, white: float, plan, levels: list) -> np
     if N == V:
         return np.zeros((0, C), np.float32)
     c0, c1 = h.children[:, 0], h.children[:, 1]
-    c = c.reshape(V, C * n) / np.float32(white)
+    c = c.reshape(V, C * n)
     s = np.zeros((N, C), np.float64)
     for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
         rows = slice(start, min(start + CHUNK, N - V))
-        r = max(int(plan.ring_len[rows].max()), 1)
-        interp = np.einsum("mr,mrk->mk", plan.weights[rows, :r].astype(np.float32), c[plan.neighbours[rows, :r]])
-        s[V + rows.start:V + rows.stop] = radiance_bound(c[plan.vertex[rows]] - interp, C, n) ** 2
+        res = (c[plan.vertex[rows]] - plan.interpolate(c, rows)) / np.float32(white)  # T-15 residual
+        s[V + rows.start:V + rows.stop] = radiance_bound(res, C, n) ** 2
     for nodes in levels:
         s[nodes] += s[c0[nodes]] + s[c1[nodes]]
     leaves = np.maximum(h.leaf_range[V:, 1] - h.leaf_range[V:, 0], 1)
@@ -91,14 +100,26 @@ def subtree_deviation(h, levels: list) -> np.ndarray:
 
 
 def leaf_rings(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every original edge in both directions, sorted by its first vertex: (v, q, start of each v's run)."""
-    f = faces
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    e = np.concatenate([e, e[:, ::-1]])
-    e = e[e[:, 0] != e[:, 1]]
-    e = e[np.argsort(e[:, 0], kind="stable")]
-    starts = np.flatnonzero(np.r_[True, e[1:, 0] != e[:-1, 0]]) if len(e) else np.zeros(0, np.int64)
-    return e[:, 0], e[:, 1], starts
+    """Every original edge in both directions, once each, sorted by its first vertex then its second: int32
+    (v, q, start of each v's run). Made from one int64 key per directed face edge, sorted in place."""
+    f = np.asarray(faces)
+    V = int(f.max()) + 1 if f.size else 0
+    key = np.empty(6 * len(f), np.int64)
+    for i, (a, b) in enumerate(((0, 1), (1, 2), (2, 0), (1, 0), (2, 1), (0, 2))):
+        key[i * len(f):(i + 1) * len(f)] = f[:, a].astype(np.int64) * V + f[:, b]
+    key.sort()
+    keep = np.ones(len(key), bool)
+    keep[1:] = key[1:] != key[:-1]
+    key = key[keep]
+    del keep
+    v, q = (key // max(V, 1)).astype(np.int32), (key % max(V, 1)).astype(np.int32)
+    del key
+    loop = v == q
+    if loop.any():  # degenerate faces
+        v, q = v[~loop], q[~loop]
+    idx = np.int32 if len(v) < 2**31 else np.int64
+    starts = np.flatnonzero(np.r_[True, v[1:] != v[:-1]]).astype(idx) if len(v) else np.zeros(0, idx)
+    return v, q, starts
 
 
 def height_levels(h) -> list[np.ndarray]:
@@ -113,7 +134,8 @@ def coefficient_boxes(h, c: np.ndarray, white: float, levels: list) -> np.ndarra
     """T-14 for one light sample's completed coefficients ``c`` (V, C, ncoef): the box of every coefficient over
     each internal node's leaves, in units of ``white``: (N - V, 2, C, ncoef) float16, centre then half-width
     (clipped to float16's range), made bottom-up one height level at a time (children always sit on lower
-    levels)."""
+    levels), ``CHUNK`` nodes at a time; the float32 minimum and maximum are kept for internal nodes only (a leaf's
+    are its own coefficients)."""
     V, N = h.num_vertices, h.num_nodes
     _, C, n = c.shape
     out = np.zeros((N - V, 2, C, n), np.float16)
@@ -121,12 +143,24 @@ def coefficient_boxes(h, c: np.ndarray, white: float, levels: list) -> np.ndarra
         return out
     c0, c1 = h.children[:, 0], h.children[:, 1]
     big = float(np.finfo(np.float16).max)
-    mn = np.empty((N, C * n), np.float32)
-    mn[:V] = c.reshape(V, C * n) / np.float32(white)
-    mx = mn.copy()
-    for nodes in levels:
-        mn[nodes] = np.minimum(mn[c0[nodes]], mn[c1[nodes]])
-        mx[nodes] = np.maximum(mx[c0[nodes]], mx[c1[nodes]])
-    out[:, 0] = np.clip(0.5 * (mx[V:] + mn[V:]), -big, big).reshape(N - V, C, n)
-    out[:, 1] = np.clip(0.5 * (mx[V:] - mn[V:]), 0, big).reshape(N - V, C, n)
+    c, white = c.reshape(V, C * n), np.float32(white)
+    mn = np.empty((N - V, C * n), np.float32)
+    mx = np.empty_like(mn)
+
+    def box(ch):  # (min, max) of nodes ch, leaves or internal
+        leaf = ch < V
+        lo, hi = np.empty((len(ch), C * n), np.float32), np.empty((len(ch), C * n), np.float32)
+        lo[leaf] = hi[leaf] = c[ch[leaf]] / white
+        lo[~leaf], hi[~leaf] = mn[ch[~leaf] - V], mx[ch[~leaf] - V]
+        return lo, hi
+
+    for level in levels:
+        for start in range(0, len(level), CHUNK):
+            nodes = level[start:start + CHUNK]
+            (lo0, hi0), (lo1, hi1) = box(c0[nodes]), box(c1[nodes])
+            mn[nodes - V], mx[nodes - V] = np.minimum(lo0, lo1), np.maximum(hi0, hi1)
+    for start in range(0, N - V, CHUNK):
+        rows = slice(start, min(start + CHUNK, N - V))
+        out[rows, 0] = np.clip(0.5 * (mx[rows] + mn[rows]), -big, big).reshape(-1, C, n)
+        out[rows, 1] = np.clip(0.5 * (mx[rows] - mn[rows]), 0, big).reshape(-1, C, n)
     return out

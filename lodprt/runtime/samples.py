@@ -124,7 +124,7 @@ class SampleCache:
         return np.array([where[int(k)] for k in samples], np.int32)
 
     def _load(self, slot: int, sample: int) -> None:
-        c = self.store.complete(sample).astype(np.float32)  # T-15
+        c = self.store.complete(sample, dtype=np.float32)  # T-15, in float32 throughout
         if self.slot_sample[slot] >= 0:
             log.debug("sample cache: slot %d: sample %d replaces %d", slot, sample, self.slot_sample[slot])
         if self.derived:  # per-node bounds from the field drawn with the light on the sample (S_j by default)
@@ -146,7 +146,7 @@ class SampleCache:
             arr = np.zeros((rows, self.slots) + tuple(shape), dtype)
             for s in np.flatnonzero(self.slot_sample >= 0):  # from S_j: completed afresh when slots hold R_j
                 k = int(self.slot_sample[s])
-                c = self.coeffs[:, s] if self.split is None else self.store.complete(k)
+                c = self.coeffs[:, s] if self.split is None else self.store.complete(k, dtype=np.float32)
                 c = c.astype(np.float32) if self.drawn is None else self.drawn(k, c.astype(np.float32))
                 arr[:, s] = make(c)
             self.derived[name] = (arr, make)

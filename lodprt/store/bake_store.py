@@ -178,17 +178,17 @@ class Store:
             self._cache[key] = self.complete(sample)
         return self._cache[key]
 
-    def complete(self, sample: int) -> np.ndarray:
-        """(V, C, ncoef) float64 coefficients of ``sample`` completed afresh (T-15), not cached: ``coefficients``
-        caches them."""
+    def complete(self, sample: int, dtype=np.float64) -> np.ndarray:
+        """(V, C, ncoef) coefficients of ``sample`` completed afresh (T-15), not cached: ``coefficients`` caches
+        them. In ``dtype`` (float64 by default; float32 completes in float32 throughout, no float64 copy)."""
         ids, coeffs = self.sample(sample)
         kept = np.zeros(self.num_vertices, bool)
         kept[ids] = True
         if (self.referenced & ~kept).any():
             cut = self.cut_arrays(sample)
-            out = self.completion_plan().complete(ids, coeffs.astype(np.float64), self.num_vertices, **cut)
+            out = self.completion_plan().complete(ids, coeffs, self.num_vertices, dtype=dtype, **cut)
         else:
-            out = np.zeros((self.num_vertices,) + coeffs.shape[1:], np.float64)
+            out = np.zeros((self.num_vertices,) + coeffs.shape[1:], dtype)
             out[ids] = coeffs
         return out
 
