@@ -35,8 +35,13 @@ class InsideCheck:
             object_id = np.asarray(self.store.read("scene/object_id"))
             names = list(self.store.root["scene"].attrs.get("object_names", []))
             of_face = object_id[faces[:, 0]] if len(faces) else np.zeros(0, int)
-            self.parts = [(names[k] if k < len(names) else f"object {k}", faces[of_face == k])
-                          for k in np.unique(of_face)]
+            ks = np.unique(of_face)
+            if len(of_face) < 2 or (of_face[1:] >= of_face[:-1]).all():  # objects in order (as baked): views
+                cut = np.searchsorted(of_face, np.r_[ks, ks[-1] + 1] if len(ks) else [0])
+                rows = [slice(cut[i], cut[i + 1]) for i in range(len(ks))]
+            else:
+                rows = [of_face == k for k in ks]
+            self.parts = [(names[k] if k < len(names) else f"object {k}", faces[r]) for k, r in zip(ks, rows)]
         return self.parts
 
     def check(self, points, what: str) -> list[tuple[tuple, str]]:

@@ -31,8 +31,8 @@ class ErrorCache:
     def __init__(self, num_nodes: int):
         self.frame = 0
         self.culled = np.zeros(num_nodes, bool)
-        self.err = np.zeros(num_nodes)
-        self.stamp = np.full(num_nodes, -1, np.int64)
+        self.err = np.zeros(num_nodes, np.float32)  # the kernel's float32 errors (4 bytes a node: docs/SCALE.md)
+        self.stamp = np.full(num_nodes, -1, np.int32)
         self.refresh_all = True  # the next frame evaluates every candidate (set by jumps and new bounds)
 
     def lookup(self, nodes: np.ndarray, bound: float, evaluate, coherent: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -50,7 +50,7 @@ class ErrorCache:
             new = nodes[fresh]
             c, e = evaluate(new)
             self.culled[new], self.err[new], self.stamp[new] = c, e, self.frame
-        return self.culled[nodes], self.err[nodes]
+        return self.culled[nodes], self.err[nodes].astype(np.float64)
 
 
 class CutRefinement:
@@ -59,11 +59,12 @@ class CutRefinement:
 
     def __init__(self, h, cut, device: str, max_passes: int):
         self.h, self.cut, self.device, self.max_passes = h, cut, device, int(max_passes)
-        self.blocker = np.full(h.num_nodes, -1, np.int64)  # a finer neighbour that blocked this collapse
+        self.blocker = np.full(h.num_nodes, -1, np.int32)  # a finer neighbour that blocked this collapse
         self.fails = np.zeros(h.num_nodes, np.int8)  # failed collapses in a row, and when to try again
         lr = h.leaf_range
-        self.subtree_edges = cut.edge_offsets[lr[:, 1]] - cut.edge_offsets[lr[:, 0]]
-        self.retry_at = np.zeros(h.num_nodes, np.int64)
+        edges = cut.edge_offsets[lr[:, 1]] - cut.edge_offsets[lr[:, 0]]
+        self.subtree_edges = edges.astype(np.int32) if len(edges) and edges.max() < 2**31 else edges
+        self.retry_at = np.zeros(h.num_nodes, np.int32)
         self.converged_once = False
         self.dirty, self.settled = True, False  # something changed since the cut settled; it has settled
         #: (N,) errors that add to the criterion's this frame (M-6: the actual light's shadow edges), or None

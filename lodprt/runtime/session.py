@@ -523,7 +523,7 @@ class Runtime:
 
         nodes, err = shadow_edge_errors(self.h, self.cut.anc, vid, step, weight)
         if ref.extra is None or len(ref.extra) != self.h.num_nodes:
-            ref.extra = np.zeros(self.h.num_nodes)
+            ref.extra = np.zeros(self.h.num_nodes, np.float32)
         else:
             ref.extra[:] = 0.0
         ref.extra[nodes] = err

@@ -24,9 +24,11 @@ class IncrementalTriangulation:
         faces = np.ascontiguousarray(faces, np.int32).reshape(-1, 3)
         V, F = h.num_vertices, len(faces)
         ptr, corner = vertex_corners(faces, V)  # faces around each original vertex (CSR)
-        i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device)  # noqa: E731
-        self._in = [i32(ptr), i32(corner // 3), wp.array(faces, dtype=wp.int32, ndim=2, device=device),
-                    i32(h.vertex)]
+        # read-only inputs: on the CPU they wrap the int32 arrays (the caller's faces, the hierarchy's vertex)
+        i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device,  # noqa: E731
+                                 copy=device != "cpu")
+        self._in = [i32(ptr), i32(corner // 3), wp.array(faces, dtype=wp.int32, ndim=2, device=device,
+                                                         copy=device != "cpu"), i32(h.vertex)]
         self._seen = np.full(V, -1, np.int32)  # anc at the last call (-1: never)
         self._state = [wp.zeros((F, 3), dtype=wp.int32, device=device),
                        wp.full(F, -1, dtype=wp.int32, device=device),

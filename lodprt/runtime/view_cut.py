@@ -322,8 +322,11 @@ class Cut:
 
             wp = warp()
             h = self.h
-            i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device)  # noqa: E731
-            i2 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, ndim=2, device=device)  # noqa: E731
+            # read-only inputs: on the CPU they wrap the int32 arrays already held (no second copy, docs/SCALE.md)
+            i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device,  # noqa: E731
+                                     copy=device != "cpu")
+            i2 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, ndim=2, device=device,  # noqa: E731
+                                    copy=device != "cpu")
             d = {"children": i2(h.children), "parent": i32(h.parent), "creation": i32(h.creation),
                  "leaf_order": i32(h.leaf_order), "leaf_range": i2(h.leaf_range), "edge_ptr": i32(self._ptr),
                  "edge_nbr": i32(self._nbr), "stack": wp.empty(max(h.num_nodes, 1), dtype=wp.int32, device=device),
