@@ -427,8 +427,14 @@ vec10d = wp.types.vector(length=10, dtype=wp.float64)
 
 
 @wp.func
-def row10(w: wp.array2d(dtype=wp.float64), f: int):
-    return vec10d(w[f, 0], w[f, 1], w[f, 2], w[f, 3], w[f, 4], w[f, 5], w[f, 6], w[f, 7], w[f, 8], w[f, 9])
+def face_quadric(plane: wp.array2d(dtype=wp.float64), weight: wp.array(dtype=wp.float64), f: int):
+    """``weight x plane plane^T`` of face ``f``, entry (r, c) as ``(weight p_r) p_c`` (numpy's order of the products)."""
+    a = weight[f] * plane[f, 0]
+    b = weight[f] * plane[f, 1]
+    c = weight[f] * plane[f, 2]
+    d = weight[f] * plane[f, 3]
+    return vec10d(a * plane[f, 0], a * plane[f, 1], a * plane[f, 2], a * plane[f, 3], b * plane[f, 1],
+                  b * plane[f, 2], b * plane[f, 3], c * plane[f, 2], c * plane[f, 3], d * plane[f, 3])
 
 
 @wp.kernel
@@ -436,11 +442,13 @@ def plane_sums(
     first: int,  # In: the vertex of thread 0 (a slice of the pass)
     fstart: wp.array(dtype=wp.int64),  # In: (n + 1,) CSR start of each vertex's corners
     corner: wp.array(dtype=wp.int32),  # In: (3M,) flat corner indices grouped by vertex, ascending
-    weight: wp.array2d(dtype=wp.float64),  # In: (M, 10) each face's area x p p^T entries (QUADRIC_ENTRIES)
-    quadric: wp.array2d(dtype=wp.float64),  # Out: (n, 10) the sums over the faces at each vertex
+    plane: wp.array2d(dtype=wp.float64),  # In: (M, 4) each face's plane p = (n, -n.x)
+    weight: wp.array(dtype=wp.float64),  # In: (M,) each face's weight (its area)
+    quadric: wp.array2d(dtype=wp.float64),  # Out: (n, 10) the sums over the faces at each vertex (QUADRIC_ENTRIES)
 ):
     # Garland-Heckbert: Q_v = sum of the face quadrics at v, added corner slot by corner slot (the faces that have v
-    # as corner 0, in face order, then corner 1, then 2): the float sums numpy's per-slot bincounts give
+    # as corner 0, in face order, then corner 1, then 2): the float sums numpy's per-slot bincounts give (on the CPU,
+    # where no multiply-add is fused)
     v = first + wp.tid()
     s0 = vec10d()
     s1 = vec10d()
@@ -449,11 +457,11 @@ def plane_sums(
         c = int(corner[k])
         j = c % 3
         if j == 0:
-            s0 = s0 + row10(weight, c // 3)
+            s0 = s0 + face_quadric(plane, weight, c // 3)
         elif j == 1:
-            s1 = s1 + row10(weight, c // 3)
+            s1 = s1 + face_quadric(plane, weight, c // 3)
         else:
-            s2 = s2 + row10(weight, c // 3)
+            s2 = s2 + face_quadric(plane, weight, c // 3)
     total = ((vec10d() + s0) + s1) + s2
     for k in range(10):
         quadric[v, k] = total[k]

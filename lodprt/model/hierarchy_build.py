@@ -96,15 +96,14 @@ def _plane_quadrics(q: np.ndarray, planes: np.ndarray, weight: np.ndarray, corne
 
 def _face_sums(q: np.ndarray, planes: np.ndarray, weight: np.ndarray, fstart, corner, threads) -> None:
     """Set the quadrics ``q`` (V, 10) to the sum of ``weight x plane plane^T`` (planes (F, 4)) over the faces at
-    each vertex (``plane_sums`` on the corner CSR ``fstart``, ``corner``: the sums ``_plane_quadrics`` gives)."""
+    each vertex (``plane_sums`` on the corner CSR ``fstart``, ``corner``: the sums ``_plane_quadrics`` gives, bit for
+    bit on the CPU)."""
     wp = warp()
     from lodprt.kernels import hierarchy as kh
 
-    w = np.empty((len(planes), len(QUADRIC_ENTRIES)))
-    for k, (r, c) in enumerate(QUADRIC_ENTRIES):
-        np.multiply(weight * planes[:, r], planes[:, c], out=w[:, k])
     threads.launch(kh.plane_sums, len(q), [warp_view(fstart, wp.int64), warp_view(corner, wp.int32),
-                                           warp_view(w, wp.float64), warp_view(q, wp.float64)], work=fstart)
+                                           warp_view(planes, wp.float64), warp_view(weight, wp.float64),
+                                           warp_view(q, wp.float64)], work=fstart)
 
 
 def _boundary_faces(work: np.ndarray, fstart: np.ndarray, corner: np.ndarray, a: np.ndarray, b: np.ndarray):
