@@ -106,3 +106,30 @@ def test_run_time_memory_does_not_grow_with_the_samples(tmp_path):
         tracemalloc.stop()
         assert rt.samples.completed <= 8
     assert peaks[(5, 1, 5)] - peaks[(1, 1, 1)] < 4 * per, (peaks, per)  # all 25 would add 24 x per
+
+
+def test_direct_only_store_keeps_no_coefficients_and_the_same_bounds(store):
+    """M-1 on a direct-only store reads no sample coefficients: the slots hold none and no sample is completed,
+    yet the per-node bounds (S-2 detail, E-1 mean square, the lit flags) are exactly those made from the completed
+    sample through ``DirectLight.drawn``, the path that completes it."""
+    from lodprt.runtime import frame_error, node_bounds
+
+    assert not int(store.attrs.get("bounces", 0) or 0)  # a direct-only store
+    rt = Runtime(store, device="cpu", target_psnr=36)
+    rt.set_lights(store.light_positions[[3, 5]])
+    assert rt.samples.coeffs.shape[0] == 0 and rt.samples.coeffs.nbytes == 0
+    C, n = rt.samples.C, rt.samples.n
+    assert n > 1 and rt.samples.bytes_per_slot() < store.num_vertices * 4 * C * n / 4  # bounds only: no coefficients
+    h, plan, white = rt.h, store.completion_plan(), rt.white
+    levels, rings = node_bounds.height_levels(h), node_bounds.leaf_rings(rt.faces)
+    direct = rt.lighting.direct
+    for slot in rt.used_slots:
+        k = int(rt.samples.slot_sample[slot])
+        f = direct.drawn(k, store.complete(k, dtype=np.float32))
+        np.testing.assert_array_equal(rt.detail[:, slot], node_bounds.detail_bounds(h, f, white, plan, rings, levels))
+        np.testing.assert_array_equal(rt.samples.derived["detail_ms"][0][:, slot],
+                                      node_bounds.detail_mean_square(h, f, white, plan, levels))
+        np.testing.assert_array_equal(rt.samples.derived["lit"][0][:, slot], (f.reshape(len(f), -1) != 0).any(1))
+    rt.set_camera(camera(rt))
+    frame = rt.update()
+    assert len(frame.triangles) and frame_error is not None

@@ -202,7 +202,9 @@ def rotate_about(point, centre, axis, angle: float) -> np.ndarray:
 
 def default_eye(store) -> tuple[float, float, float]:
     """A three-quarter view from the front (+z) and above that frames the scene at a 40-degree field of view."""
-    p = store.positions[np.unique(store.faces.ravel())]
+    p = store.positions[store.referenced]  # the vertices the faces use (kept on the Store: no sort)
+    if not len(p):
+        p = np.zeros((1, 3), np.float32)
     c = 0.5 * (p.min(0) + p.max(0))
     r = 0.5 * float(np.linalg.norm(p.max(0) - p.min(0))) or 1.0
     return tuple(float(x) for x in c + r * np.array([0.5, 0.9, 1.9]))
@@ -210,7 +212,9 @@ def default_eye(store) -> tuple[float, float, float]:
 
 def scene_centre(store) -> tuple[float, float, float]:
     """Centre of the bounding box of the vertices the faces use (the default look-at point)."""
-    p = store.positions[np.unique(store.faces.ravel())]
+    p = store.positions[store.referenced]
+    if not len(p):
+        p = np.zeros((1, 3), np.float32)
     return tuple(float(x) for x in 0.5 * (p.min(0) + p.max(0)))
 
 

@@ -134,6 +134,16 @@ class DirectLight:
         out[self.referenced] = self._at_sample(sample, True)[1]
         return out
 
+    def direct_field(self, sample: int) -> tuple[np.ndarray, np.ndarray]:
+        """(visibility states (V,) uint8, D_j V_j (V, C, ncoef) float32) of light sample ``sample``, 0 at the
+        vertices no face uses: on a direct-only store the field M-1 draws with the light on the sample, made without
+        completing the sample (``drawn`` of its completion gives the same: the bake keeps only referenced
+        vertices, and each of them is overwritten here)."""
+        states, direct = self._at_sample(sample, True)
+        out = np.zeros((self.num_vertices, self.channels, self.ncoef), np.float32)
+        out[self.referenced] = direct
+        return states, out
+
     # -- per frame (M-1) -----------------------------------------------------------------------------------------
     def add(self, vid, lights, colors, light_slots, light_weights, sample_vis, coeffs, *, eye=None, radiance=None,
             eye_basis=None, threads=None) -> int:

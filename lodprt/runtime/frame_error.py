@@ -239,6 +239,20 @@ def projected_area(rt, nodes: np.ndarray) -> np.ndarray:
     return area * cos * (rt.focal_px() / depth) ** 2
 
 
+def derive_mean_square(rt, levels: list | None = None) -> None:
+    """E-1's per-sample mean squared residual per internal node (``node_bounds.detail_mean_square``), made with
+    each sample the Runtime's cache holds from now on (the Runtime asks for it before its first sample: made
+    then with each sample's field, not again)."""
+    from lodprt.runtime import node_bounds
+
+    cache, h = rt.samples, rt.h
+    if "detail_ms" not in cache.derived:
+        plan, white = rt.store.completion_plan(), rt.white
+        levels = node_bounds.height_levels(h) if levels is None else levels
+        cache.derive("detail_ms", lambda c: node_bounds.detail_mean_square(h, c, white, plan, levels),
+                     h.num_nodes - h.num_vertices, (cache.C,), np.float32)
+
+
 def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
     """E-1's per-pixel squared error of each coarse node under the current lights (units of white squared): the
     samples' mean squared completion residual (``node_bounds.detail_mean_square``, made with each sample) as RMS
@@ -247,10 +261,7 @@ def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
     from lodprt.runtime import node_bounds
 
     cache, h = rt.samples, rt.h
-    if "detail_ms" not in cache.derived:
-        plan, levels, white = rt.store.completion_plan(), node_bounds.height_levels(h), rt.white
-        cache.derive("detail_ms", lambda c: node_bounds.detail_mean_square(h, c, white, plan, levels),
-                     h.num_nodes - h.num_vertices, (cache.C,), np.float32)
+    derive_mean_square(rt)
     rms = np.sqrt(cache.derived["detail_ms"][0][nodes - h.num_vertices][:, rt.used_slots])  # (K, U, C)
     w = np.abs(rt.sample_weights[rt.used_samples])  # (U, 3)
     if rms.shape[2] == 1:

@@ -17,6 +17,16 @@ log = logging.getLogger(__name__)
 WHY = {"light": "it lights that mesh's inside only", "eye": "the frame shows that mesh's culled inside (black)"}
 
 
+def object_box(positions: np.ndarray, faces: np.ndarray):
+    """(min, max) corners of the vertices ``faces`` use, or None for no faces (a mask, not a sort: O(V + F))."""
+    if not len(faces):
+        return None
+    used = np.zeros(len(positions), bool)
+    used[faces.ravel()] = True
+    p = positions[used]
+    return p.min(0), p.max(0)
+
+
 class InsideCheck:
     """Checks lights and eyes against each object of ``store``'s scene (its faces grouped by the object of their
     first vertex; names from the store's ``object_names``, the floor last)."""
@@ -55,8 +65,7 @@ class InsideCheck:
         self.checked[what] = key
         positions = self.store.positions
         if self.boxes is None:  # each object's bounding box: a point outside it is outside without a ray
-            self.boxes = [(positions[np.unique(f)].min(0), positions[np.unique(f)].max(0)) if len(f) else None
-                          for _, f in self.objects()]
+            self.boxes = [object_box(positions, f) for _, f in self.objects()]
         found = []
         for (name, faces), box in zip(self.objects(), self.boxes):
             near = np.zeros(len(pts), bool) if box is None else ((pts > box[0]) & (pts < box[1])).all(1)

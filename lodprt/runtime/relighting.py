@@ -44,8 +44,11 @@ class Relighting:
         split = d.split if d is not None and (d.residual or d.uses_visibility) else None
         # the view cut's per-node bounds bound the error of the field drawn at each sample (D_j V_j exact on a
         # direct-only store, not the light cut's completion)
+        # the lighting reads no coefficients (M-1 on a direct-only store): the slots keep none and no sample is
+        # completed, the bounds come from D_j V_j (``DirectLight.direct_field``)
         self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress, split=split,
-                                   drawn=None if d is None else d.drawn)
+                                   drawn=None if d is None else d.drawn,
+                                   field=None if self.uses_samples else d.direct_field)
         self.channels, self.ncoef = self.samples.C, self.samples.n
         self.weights = None
         self.rays = 0  # shadow rays the last relight cast (M-3)

@@ -33,7 +33,8 @@ class SampleCache:
     content does (the device copies are refreshed from it).
     """
 
-    def __init__(self, store, *, cache_bytes: int | None = None, progress=None, split=None, drawn=None):
+    def __init__(self, store, *, cache_bytes: int | None = None, progress=None, split=None, drawn=None,
+                 field=None):
         self.store = store
         self.V = store.num_vertices
         self.C = int(store.root.attrs.get("channels", 1))
@@ -49,11 +50,16 @@ class SampleCache:
         # drawn(sample, completed) -> the field the run time draws with the light on that sample, which the derived
         # per-node bounds are made from (lodprt.runtime.direct_light.DirectLight.drawn); None: S_j itself
         self.drawn = drawn
+        # field(sample) -> (visibility (V,) uint8, drawn field (V, C, ncoef)): when the lighting never reads the
+        # samples' coefficients (M-1 on a direct-only store), the slots keep no coefficients (``coeffs`` has no
+        # rows) and a sample is not completed: its derived bounds come from this field (D_j V_j), its visibility
+        # (with ``split``) from the same shadow rays (docs/SCALE.md: run-time memory)
+        self.field = field
         self.visibility = np.zeros((self.V, 0), np.uint8)
         self.derived: dict[str, tuple[np.ndarray, typing.Callable]] = {}
         self.slot_sample = np.zeros(0, np.int64)
         self.last_used = np.zeros(0, np.int64)
-        self.coeffs = np.zeros((self.V, 0, self.C, self.n), np.float32)
+        self.coeffs = np.zeros((0 if field is not None else self.V, 0, self.C, self.n), np.float32)
         self.clock = 0
         self.version = 0
         self.completed = 0  # samples completed so far (misses)
@@ -61,7 +67,7 @@ class SampleCache:
     # -- size ------------------------------------------------------------------------------------------------
     def bytes_per_slot(self) -> int:
         """Bytes one slot holds: the coefficients and every derived array's row."""
-        per = self.V * self.C * self.n * 4 + (self.V if self.split is not None else 0)
+        per = len(self.coeffs) * self.C * self.n * 4 + (self.V if self.split is not None else 0)
         for arr, _ in self.derived.values():
             per += arr[:, :1].nbytes
         return per
@@ -124,9 +130,17 @@ class SampleCache:
         return np.array([where[int(k)] for k in samples], np.int32)
 
     def _load(self, slot: int, sample: int) -> None:
-        c = self.store.complete(sample, dtype=np.float32)  # T-15, in float32 throughout
         if self.slot_sample[slot] >= 0:
             log.debug("sample cache: slot %d: sample %d replaces %d", slot, sample, self.slot_sample[slot])
+        if self.field is not None:  # no coefficients kept: the drawn field and visibility from one set of rays
+            vis, f = self.field(sample)
+            for arr, make in self.derived.values():
+                arr[:, slot] = make(f)
+            if self.split is not None:
+                self.visibility[:, slot] = vis
+            self._filled(slot, sample)
+            return
+        c = self.store.complete(sample, dtype=np.float32)  # T-15, in float32 throughout
         if self.derived:  # per-node bounds from the field drawn with the light on the sample (S_j by default)
             f = c if self.drawn is None else self.drawn(sample, c)
             for arr, make in self.derived.values():
@@ -135,6 +149,9 @@ class SampleCache:
             vis, c = self.split(sample, c)  # M-2
             self.visibility[:, slot] = vis
         self.coeffs[:, slot] = c
+        self._filled(slot, sample)
+
+    def _filled(self, slot: int, sample: int) -> None:
         self.slot_sample[slot] = sample
         self.completed += 1
         self.version += 1
@@ -146,6 +163,9 @@ class SampleCache:
             arr = np.zeros((rows, self.slots) + tuple(shape), dtype)
             for s in np.flatnonzero(self.slot_sample >= 0):  # from S_j: completed afresh when slots hold R_j
                 k = int(self.slot_sample[s])
+                if self.field is not None:
+                    arr[:, s] = make(self.field(k)[1])
+                    continue
                 c = self.coeffs[:, s] if self.split is None else self.store.complete(k, dtype=np.float32)
                 c = c.astype(np.float32) if self.drawn is None else self.drawn(k, c.astype(np.float32))
                 arr[:, s] = make(c)

@@ -174,6 +174,9 @@ class Runtime:
         self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
             self._node_bounds(self.criterion.NODE_BOUNDS[0])
+            if self.steering is not None:  # E-1 and E-2's per-sample arrays, made with each sample from the first
+                frame_error.derive_mean_square(self, self._levels)
+                self._derive_lit()
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
     # -- set-up ------------------------------------------------------------------------------------------------
@@ -418,10 +421,14 @@ class Runtime:
     def lit_vertices(self) -> np.ndarray:
         """(V,) bool: whether each vertex has any radiance at one of the samples in use (the field drawn at each,
         ``SampleCache.drawn``), for E-2's count of the pixels a frame shows non-black."""
+        return self._derive_lit()[:, self.used_slots].any(1)
+
+    def _derive_lit(self) -> np.ndarray:
+        """(V, slots) bool per sample slot: any radiance in the field drawn at the sample (made with each sample)."""
         cache = self.samples
         if "lit" not in cache.derived:
             cache.derive("lit", lambda c: (c.reshape(len(c), -1) != 0).any(1), self.h.num_vertices, (), bool)
-        return cache.derived["lit"][0][:, self.used_slots].any(1)
+        return cache.derived["lit"][0]
 
     def scene_bvh(self):
         """Warp mesh (BVH) of the store's triangles on the Runtime's device, face ids as in ``faces``: the direct
