@@ -1,7 +1,7 @@
 """The parts of the frame estimate (E-1..E-4, docs/RUNTIME.md) and of the view cut's default, each against its own
 oracle: E-2's primary rays (``kernels.runtime.first_hits``) against a float64 Moller-Trumbore caster written here,
 their coverage against the renderer's, S-3's subtree deviation against a walk of the hierarchy, the field the view
-cut bounds on a direct-only store (``DirectLight.drawn``) against the bake's own rows, and the default target:
+cut bounds on a direct-only store (``DirectLight.direct_field``) against the bake's own rows, and the default target:
 on unless a bound or a triangle budget is given alone."""
 
 import numpy as np
@@ -131,8 +131,8 @@ def test_drawn_field_is_the_bake_where_the_light_cut_kept_vertices(bunny_bake):
     for sample in (0, 4):
         ids, rows = store.sample(sample)
         done = store.complete(sample).astype(np.float32)
-        drawn = d.drawn(sample, done)
-        assert drawn.shape == done.shape
+        states, drawn = d.direct_field(sample)  # made without completing the sample
+        assert drawn.shape == done.shape and states.shape == (store.num_vertices,)
         scale = float(np.abs(rows).max())
         np.testing.assert_allclose(drawn[ids], rows, atol=2e-3 * scale)
         other = store.referenced.copy()

@@ -111,7 +111,7 @@ def test_run_time_memory_does_not_grow_with_the_samples(tmp_path):
 def test_direct_only_store_keeps_no_coefficients_and_the_same_bounds(store):
     """M-1 on a direct-only store reads no sample coefficients: the slots hold none and no sample is completed,
     yet the per-node bounds (S-2 detail, E-1 mean square, the lit flags) are exactly those made from the completed
-    sample through ``DirectLight.drawn``, the path that completes it."""
+    sample with D_j V_j written over its referenced vertices (the path that completes it)."""
     from lodprt.runtime import frame_error, node_bounds
 
     assert not int(store.attrs.get("bounces", 0) or 0)  # a direct-only store
@@ -125,7 +125,8 @@ def test_direct_only_store_keeps_no_coefficients_and_the_same_bounds(store):
     direct = rt.lighting.direct
     for slot in rt.used_slots:
         k = int(rt.samples.slot_sample[slot])
-        f = direct.drawn(k, store.complete(k, dtype=np.float32))
+        f = store.complete(k, dtype=np.float32)
+        f[store.referenced] = direct.direct_field(k)[1][store.referenced]
         np.testing.assert_array_equal(rt.detail[:, slot], node_bounds.detail_bounds(h, f, white, plan, rings, levels))
         np.testing.assert_array_equal(rt.samples.derived["detail_ms"][0][:, slot],
                                       node_bounds.detail_mean_square(h, f, white, plan, levels))

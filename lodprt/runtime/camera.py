@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.model.scene import referenced_bounds
 
 log = logging.getLogger(__name__)
 
@@ -202,20 +203,16 @@ def rotate_about(point, centre, axis, angle: float) -> np.ndarray:
 
 def default_eye(store) -> tuple[float, float, float]:
     """A three-quarter view from the front (+z) and above that frames the scene at a 40-degree field of view."""
-    p = store.positions[store.referenced]  # the vertices the faces use (kept on the Store: no sort)
-    if not len(p):
-        p = np.zeros((1, 3), np.float32)
-    c = 0.5 * (p.min(0) + p.max(0))
-    r = 0.5 * float(np.linalg.norm(p.max(0) - p.min(0))) or 1.0
+    lo, hi = referenced_bounds(store.positions, store.referenced)  # the vertices the faces use
+    c = 0.5 * (lo + hi)
+    r = 0.5 * float(np.linalg.norm(hi - lo)) or 1.0
     return tuple(float(x) for x in c + r * np.array([0.5, 0.9, 1.9]))
 
 
 def scene_centre(store) -> tuple[float, float, float]:
     """Centre of the bounding box of the vertices the faces use (the default look-at point)."""
-    p = store.positions[store.referenced]
-    if not len(p):
-        p = np.zeros((1, 3), np.float32)
-    return tuple(float(x) for x in 0.5 * (p.min(0) + p.max(0)))
+    lo, hi = referenced_bounds(store.positions, store.referenced)
+    return tuple(float(x) for x in 0.5 * (lo + hi))
 
 
 def camera_jump(a: Camera, b: Camera, jump: float) -> bool:

@@ -114,31 +114,18 @@ class DirectLight:
     def split(self, sample: int, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(visibility (V,) uint8, residual (V, C, ncoef) float32) of light sample ``sample`` whose completed
         coefficients are ``coeffs`` (V, C, ncoef): M-2's R_j = S_j - D_j V_j at the referenced vertices
-        (``_at_sample``), unreferenced vertices BACK_FACING with their coefficients as given. Without a
-        residual (``self.residual`` False: a direct-only store) the coefficients come back as given."""
-        states, direct = self._at_sample(sample, self.residual)
-        if not self.residual:
-            return states, np.asarray(coeffs, np.float32)
+        (``_at_sample``), unreferenced vertices BACK_FACING with their coefficients as given. A GI store's only:
+        a direct-only store keeps no coefficients and takes its visibility from ``direct_field``."""
+        states, direct = self._at_sample(sample, True)
         residual = np.asarray(coeffs, np.float32).copy()
         residual[self.referenced] -= direct
         return states, residual
 
-    def drawn(self, sample: int, coeffs: np.ndarray) -> np.ndarray:
-        """The radiance field M-1 draws with the light on sample ``sample`` (V, C, ncoef) float32, whose
-        interpolation error the view cut bounds (``lodprt.runtime.node_bounds``): S_j itself on a GI store (M-1
-        gives back S_j on a sample), D_j V_j exact at every referenced vertex on a direct-only store (where the
-        light cut's completion ``coeffs`` is linear between the vertices it kept, and the drawn field is not)."""
-        if self.residual:
-            return np.asarray(coeffs, np.float32)
-        out = np.asarray(coeffs, np.float32).copy()
-        out[self.referenced] = self._at_sample(sample, True)[1]
-        return out
-
     def direct_field(self, sample: int) -> tuple[np.ndarray, np.ndarray]:
         """(visibility states (V,) uint8, D_j V_j (V, C, ncoef) float32) of light sample ``sample``, 0 at the
-        vertices no face uses: on a direct-only store the field M-1 draws with the light on the sample, made without
-        completing the sample (``drawn`` of its completion gives the same: the bake keeps only referenced
-        vertices, and each of them is overwritten here)."""
+        vertices no face uses: on a direct-only store the field M-1 draws with the light on the sample (the light
+        cut's completion is linear between the vertices it kept, the drawn field is not), made without completing
+        the sample."""
         states, direct = self._at_sample(sample, True)
         out = np.zeros((self.num_vertices, self.channels, self.ncoef), np.float32)
         out[self.referenced] = direct

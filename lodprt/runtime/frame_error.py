@@ -258,8 +258,6 @@ def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
     samples' mean squared completion residual (``node_bounds.detail_mean_square``, made with each sample) as RMS
     values combined like S-2's bounds: sum_j |W_jc| rms_jc for T-12, max over the samples around the light times
     sum_j |W_jc| for a direct interpolation (M-5); the largest channel, squared."""
-    from lodprt.runtime import node_bounds
-
     cache, h = rt.samples, rt.h
     derive_mean_square(rt)
     rms = np.sqrt(cache.derived["detail_ms"][0][nodes - h.num_vertices][:, rt.used_slots])  # (K, U, C)

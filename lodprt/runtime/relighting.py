@@ -42,12 +42,11 @@ class Relighting:
         # T-15 per sample when the lights first use it (SPEC 5), float32 slots, vertex-major (V, slots, C, ncoef);
         # with a direct term the slots hold each sample's residual R_j (GI stores) and its visibility (M-2)
         split = d.split if d is not None and (d.residual or d.uses_visibility) else None
-        # the view cut's per-node bounds bound the error of the field drawn at each sample (D_j V_j exact on a
-        # direct-only store, not the light cut's completion)
-        # the lighting reads no coefficients (M-1 on a direct-only store): the slots keep none and no sample is
-        # completed, the bounds come from D_j V_j (``DirectLight.direct_field``)
+        # the view cut's per-node bounds bound the error of the field drawn at each sample: S_j where the lighting
+        # reads the coefficients; otherwise (M-1 on a direct-only store) the slots keep none, no sample is completed,
+        # and the bounds come from D_j V_j exact at every referenced vertex (``DirectLight.direct_field``), not the
+        # light cut's completion
         self.samples = SampleCache(store, cache_bytes=cache_bytes, progress=progress, split=split,
-                                   drawn=None if d is None else d.drawn,
                                    field=None if self.uses_samples else d.direct_field)
         self.channels, self.ncoef = self.samples.C, self.samples.n
         self.weights = None

@@ -33,8 +33,7 @@ class SampleCache:
     content does (the device copies are refreshed from it).
     """
 
-    def __init__(self, store, *, cache_bytes: int | None = None, progress=None, split=None, drawn=None,
-                 field=None):
+    def __init__(self, store, *, cache_bytes: int | None = None, progress=None, split=None, field=None):
         self.store = store
         self.V = store.num_vertices
         self.C = int(store.root.attrs.get("channels", 1))
@@ -47,9 +46,8 @@ class SampleCache:
         # M-2: split(sample, completed) -> (visibility (V,) uint8, residual (V, C, ncoef)); the slots then hold the
         # residual and ``visibility`` (V, slots) the sample's visibility states (lodprt.runtime.direct_light)
         self.split = split
-        # drawn(sample, completed) -> the field the run time draws with the light on that sample, which the derived
-        # per-node bounds are made from (lodprt.runtime.direct_light.DirectLight.drawn); None: S_j itself
-        self.drawn = drawn
+        # the derived per-node bounds are made from the field the run time draws with the light on each sample: S_j
+        # itself (T-12, and M-1 on a GI store, which gives back S_j on a sample), or, with ``field``, D_j V_j.
         # field(sample) -> (visibility (V,) uint8, drawn field (V, C, ncoef)): when the lighting never reads the
         # samples' coefficients (M-1 on a direct-only store), the slots keep no coefficients (``coeffs`` has no
         # rows) and a sample is not completed: its derived bounds come from this field (D_j V_j), its visibility
@@ -134,24 +132,16 @@ class SampleCache:
             log.debug("sample cache: slot %d: sample %d replaces %d", slot, sample, self.slot_sample[slot])
         if self.field is not None:  # no coefficients kept: the drawn field and visibility from one set of rays
             vis, f = self.field(sample)
-            for arr, make in self.derived.values():
-                arr[:, slot] = make(f)
+        else:
+            vis, f = None, self.store.complete(sample, dtype=np.float32)  # T-15, in float32 throughout
+        for arr, make in self.derived.values():  # per-node bounds from the field drawn with the light on the sample
+            arr[:, slot] = make(f)
+        if self.field is None:
             if self.split is not None:
-                self.visibility[:, slot] = vis
-            self._filled(slot, sample)
-            return
-        c = self.store.complete(sample, dtype=np.float32)  # T-15, in float32 throughout
-        if self.derived:  # per-node bounds from the field drawn with the light on the sample (S_j by default)
-            f = c if self.drawn is None else self.drawn(sample, c)
-            for arr, make in self.derived.values():
-                arr[:, slot] = make(f)
+                vis, f = self.split(sample, f)  # M-2: the slot holds R_j
+            self.coeffs[:, slot] = f
         if self.split is not None:
-            vis, c = self.split(sample, c)  # M-2
             self.visibility[:, slot] = vis
-        self.coeffs[:, slot] = c
-        self._filled(slot, sample)
-
-    def _filled(self, slot: int, sample: int) -> None:
         self.slot_sample[slot] = sample
         self.completed += 1
         self.version += 1
@@ -167,7 +157,6 @@ class SampleCache:
                     arr[:, s] = make(self.field(k)[1])
                     continue
                 c = self.coeffs[:, s] if self.split is None else self.store.complete(k, dtype=np.float32)
-                c = c.astype(np.float32) if self.drawn is None else self.drawn(k, c.astype(np.float32))
                 arr[:, s] = make(c)
             self.derived[name] = (arr, make)
             self.version += 1

@@ -420,7 +420,7 @@ class Runtime:
 
     def lit_vertices(self) -> np.ndarray:
         """(V,) bool: whether each vertex has any radiance at one of the samples in use (the field drawn at each,
-        ``SampleCache.drawn``), for E-2's count of the pixels a frame shows non-black."""
+        ``SampleCache``), for E-2's count of the pixels a frame shows non-black."""
         return self._derive_lit()[:, self.used_slots].any(1)
 
     def _derive_lit(self) -> np.ndarray:
