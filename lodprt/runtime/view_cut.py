@@ -10,27 +10,22 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, active_ancestors, concat_ranges, triangulate
+from lodprt.runtime.node_bounds import leaf_rings
 
 
 def leaf_order_adjacency(h: Hierarchy, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The original mesh's edges in CSR, rows in depth-first leaf order (so a subtree's edges are one slice), each
-    row's neighbours ascending: (neighbours (E,) int32, offsets (V + 1,) int64). One int64 key per directed edge
-    (rank of its first vertex x V + its second), sorted in place: memory of a few copies of the edge list."""
+    row's neighbours ascending: (neighbours (E,) int32, offsets (V + 1,) int64). The rows of
+    ``node_bounds.leaf_rings`` (every edge once per direction, by vertex) put in leaf order."""
     V = h.num_vertices
-    rank = np.empty(V, np.int64)
-    rank[h.leaf_order] = np.arange(V)
-    f = faces
-    key = np.empty(6 * len(f), np.int64)
-    for i, (a, b) in enumerate(((0, 1), (1, 2), (2, 0), (1, 0), (2, 1), (0, 2))):
-        key[i * len(f):(i + 1) * len(f)] = rank[f[:, a]] * V + f[:, b]
-    key.sort()
-    keep = np.ones(len(key), bool)
-    keep[1:] = key[1:] != key[:-1]
-    key = key[keep]
-    first, nbr = np.divmod(key, V)
-    del key
-    keep = rank[nbr] != first  # an edge of a degenerate face from a vertex to itself
-    return nbr[keep].astype(np.int32), np.searchsorted(first[keep], np.arange(V + 1))
+    v, q, _ = leaf_rings(faces)
+    count = np.bincount(v, minlength=V)[:V]
+    first = np.zeros(V + 1, np.int64)
+    np.cumsum(count, out=first[1:])
+    ptr = np.zeros(V + 1, np.int64)
+    np.cumsum(count[h.leaf_order], out=ptr[1:])
+    lo = first[h.leaf_order]
+    return q[concat_ranges(lo, lo + count[h.leaf_order])], ptr
 
 
 class Cut:
