@@ -65,8 +65,9 @@ def test_recorded_white_equals_the_full_scan(tmp_path, monkeypatch, colour, mode
 
 
 def test_runtime_open_reads_no_sample_for_the_white(tmp_path, monkeypatch):
-    """With the record, opening reads only the samples the first light uses (completed: ``samples.completed``);
-    without it (an older store), every sample once more."""
+    """With the record, opening reads at most the samples the first light uses (completed: ``samples.completed``;
+    none on a direct-only store, whose slots are drawn from D_j V_j, M-1); without it (an older store), every sample
+    once more."""
     from lodprt.runtime.session import Runtime
 
     out = tmp_path / "s.zarr"
@@ -75,14 +76,14 @@ def test_runtime_open_reads_no_sample_for_the_white(tmp_path, monkeypatch):
     original = Store.sample
     monkeypatch.setattr(Store, "sample", lambda self, k: reads.append(k) or original(self, k))
     rt = Runtime(open_store(out), device="cpu", lod=False)
-    assert len(reads) == rt.samples.completed < 27
+    assert len(reads) <= rt.samples.completed < 27
     assert rt.white == open_store(out).attrs[WHITE]
     old = tmp_path / "old.zarr"
     shutil.copytree(out, old)
     drop_records(old)
     reads.clear()
     rt_old = Runtime(open_store(old), device="cpu", lod=False)
-    assert len(reads) == 27 + rt_old.samples.completed and rt_old.white == rt.white
+    assert 27 <= len(reads) <= 27 + rt_old.samples.completed and rt_old.white == rt.white
 
 
 def test_bad_recorded_white_names_the_store(tmp_path):
