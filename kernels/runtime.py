@@ -116,12 +116,13 @@ def view_errors(
     offset: int,  # In: first row of this launch (a launch may cover a slice of the rows)
     nodes: wp.array(dtype=wp.int32),  # In: (K,) internal nodes to evaluate
     first_internal: int,  # In: V, the id of the first internal node (row 0 of the boxes)
-    node_pos: wp.array(dtype=wp.vec3),  # In: (N,) position of each node's vertex
-    node_collapsed: wp.array(dtype=wp.vec3),  # In: (N,) position p of the vertex each node's collapse removed
+    positions: wp.array(dtype=wp.vec3),  # In: (V,) vertex positions
+    vertex: wp.array(dtype=wp.int32),  # In: (N,) each node's vertex
+    children: wp.array2d(dtype=wp.int32),  # In: (N, 2) each node's children (-1 for a leaf)
     error_vector: wp.array(dtype=wp.vec3),  # In: (N,) p - p' (figure 10)
     axis: wp.array(dtype=wp.vec3),  # In: (N,) normal-cone axis
     half_angle: wp.array(dtype=wp.float32),  # In: (N,) normal-cone half-angle, radians
-    radius: wp.array(dtype=wp.float32),  # In: (N,) bounding-sphere radius at node_pos
+    radius: wp.array(dtype=wp.float32),  # In: (N,) bounding-sphere radius at the node's vertex
     planes: wp.array(dtype=wp.vec4),  # In: (6,) inward frustum planes, unit normals
     vp: wp.mat44,  # In: projection @ view (row-major, column vectors)
     eye: wp.vec3,  # In: camera position
@@ -155,7 +156,7 @@ def view_errors(
 ):
     k = wp.tid() + offset
     node = nodes[k]
-    p = node_pos[node]
+    p = positions[vertex[node]]
     r = radius[node]
     out = int(0)
     for i in range(6):
@@ -187,7 +188,9 @@ def view_errors(
     if cp[3] > r:
         fp = wp.min(r * focal_px / cp[3], 1.0e9)
     # e_geo: both ends of the error vector on screen, their distance over the diagonal
-    a = node_collapsed[node]
+    a = p  # the position p of the vertex the node's collapse removed (its second child's vertex)
+    if children[node, 1] >= 0:
+        a = positions[vertex[children[node, 1]]]
     b = a - error_vector[node]
     ca = vp * wp.vec4(a[0], a[1], a[2], 1.0)
     cb = vp * wp.vec4(b[0], b[1], b[2], 1.0)

@@ -10,9 +10,10 @@ tests compare with.
 
 State (shared with the host): ``active`` (N,) uint8, 1 for the nodes of the cut; ``anc`` (V,) int32 the active
 ancestor-or-self of every original vertex. Hierarchy (read only): ``children`` (N, 2), ``parent`` (N,),
-``creation`` (N,), ``leaf_order`` (V,), ``leaf_range`` (N, 2) int32; original edges in CSR with rows in depth-first
-leaf order (``edge_ptr`` (V+1,) int32 indexed by leaf rank, ``edge_nbr`` (E,) int32 original vertex ids), so the
-edges leaving the leaves of node k are ``edge_nbr[edge_ptr[leaf_range[k, 0]]:edge_ptr[leaf_range[k, 1]]]``.
+``creation`` (N,) int32, ``leaf_order`` (V,) int32, ``leaf_range`` (N, 2) int64 (the hierarchy's own, not
+copied); original edges in CSR with rows in depth-first leaf order (``edge_ptr`` (V+1,) int64 indexed by leaf
+rank, ``edge_nbr`` (E,) int32 original vertex ids), so the edges leaving the leaves of node k are
+``edge_nbr[edge_ptr[leaf_range[k, 0]]:edge_ptr[leaf_range[k, 1]]]``.
 """
 
 import warp as wp
@@ -27,11 +28,11 @@ LATEST = wp.constant(2147483647)
 def set_leaves(
     node: int,
     leaf_order: wp.array(dtype=wp.int32),
-    leaf_range: wp.array2d(dtype=wp.int32),
+    leaf_range: wp.array2d(dtype=wp.int64),
     anc: wp.array(dtype=wp.int32),
 ):
     """Every original vertex under ``node`` gets ``node`` as its active ancestor."""
-    for i in range(leaf_range[node, 0], leaf_range[node, 1]):
+    for i in range(int(leaf_range[node, 0]), int(leaf_range[node, 1])):
         anc[leaf_order[i]] = node
 
 
@@ -39,14 +40,14 @@ def set_leaves(
 def refine_blocker(
     node: int,
     creation: wp.array(dtype=wp.int32),
-    leaf_range: wp.array2d(dtype=wp.int32),
-    edge_ptr: wp.array(dtype=wp.int32),
+    leaf_range: wp.array2d(dtype=wp.int64),
+    edge_ptr: wp.array(dtype=wp.int64),
     edge_nbr: wp.array(dtype=wp.int32),
     anc: wp.array(dtype=wp.int32),
 ):
     """Split rule (thesis 3.2): an active neighbour of active ``node`` created after it, or -1 when there is none
     (the split is allowed)."""
-    for e in range(edge_ptr[leaf_range[node, 0]], edge_ptr[leaf_range[node, 1]]):
+    for e in range(int(edge_ptr[int(leaf_range[node, 0])]), int(edge_ptr[int(leaf_range[node, 1])])):
         a = anc[edge_nbr[e]]
         if a != node and creation[a] > creation[node]:
             return a
@@ -58,7 +59,7 @@ def split(
     node: int,
     children: wp.array2d(dtype=wp.int32),
     leaf_order: wp.array(dtype=wp.int32),
-    leaf_range: wp.array2d(dtype=wp.int32),
+    leaf_range: wp.array2d(dtype=wp.int64),
     active: wp.array(dtype=wp.uint8),
     anc: wp.array(dtype=wp.int32),
 ):
@@ -78,8 +79,8 @@ def coarsen_list(
     parent: wp.array(dtype=wp.int32),
     creation: wp.array(dtype=wp.int32),
     leaf_order: wp.array(dtype=wp.int32),
-    leaf_range: wp.array2d(dtype=wp.int32),
-    edge_ptr: wp.array(dtype=wp.int32),
+    leaf_range: wp.array2d(dtype=wp.int64),
+    edge_ptr: wp.array(dtype=wp.int64),
     edge_nbr: wp.array(dtype=wp.int32),
     active: wp.array(dtype=wp.uint8),  # In/out: the cut
     anc: wp.array(dtype=wp.int32),  # In/out: active ancestor of every original vertex
@@ -99,7 +100,7 @@ def coarsen_list(
         if active[c0] == wp.uint8(0) or active[c1] == wp.uint8(0):
             continue
         b = int(-1)
-        for e in range(edge_ptr[leaf_range[p, 0]], edge_ptr[leaf_range[p, 1]]):
+        for e in range(int(edge_ptr[int(leaf_range[p, 0])]), int(edge_ptr[int(leaf_range[p, 1])])):
             a = anc[edge_nbr[e]]
             if a != c0 and a != c1:
                 later = LATEST
@@ -125,8 +126,8 @@ def force_refine_list(
     children: wp.array2d(dtype=wp.int32),
     creation: wp.array(dtype=wp.int32),
     leaf_order: wp.array(dtype=wp.int32),
-    leaf_range: wp.array2d(dtype=wp.int32),
-    edge_ptr: wp.array(dtype=wp.int32),
+    leaf_range: wp.array2d(dtype=wp.int64),
+    edge_ptr: wp.array(dtype=wp.int64),
     edge_nbr: wp.array(dtype=wp.int32),
     active: wp.array(dtype=wp.uint8),  # In/out: the cut
     anc: wp.array(dtype=wp.int32),  # In/out: active ancestor of every original vertex

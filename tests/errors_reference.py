@@ -52,7 +52,7 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
     nodes = np.asarray(nodes, np.int64)
     cam = rt.camera
     eye = np.asarray(cam.eye)
-    p = rt.node_pos[nodes]
+    p = rt.node_pos(nodes).astype(np.float64)
     r = rt.radius[nodes]
     # outside the frustum: the bounding sphere is entirely behind one plane
     s = p @ rt.planes[:, :3].T + rt.planes[:, 3]
@@ -66,7 +66,8 @@ def node_errors_reference(rt, nodes) -> NodeErrors:
     back = (d > r) & (ang > 0.5 * np.pi + rt.half[nodes] + spread)
     culled = outside | back
     # e_geo: the error vector p - p' on screen over the screen diagonal
-    a = rt.node_collapsed[nodes]
+    c1 = rt.h.children[nodes, 1]  # the vertex the node's collapse removed (a leaf: its own)
+    a = rt.positions[np.where(c1 >= 0, rt.h.vertex[np.maximum(c1, 0)], rt.h.vertex[nodes])].astype(np.float64)
     b = a - rt.error_vector[nodes]
     ca = np.c_[a, np.ones(len(a))] @ rt.vp.T
     cb = np.c_[b, np.ones(len(b))] @ rt.vp.T

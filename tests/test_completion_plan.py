@@ -171,6 +171,7 @@ def old_boxes(h, c, white, levels):
 @pytest.mark.parametrize("white", [2.0, 0.37])
 def test_chunked_bounds_equal_the_unchunked_formulas(bunny_store, white):
     from lodprt.runtime import node_bounds
+    from lodprt.runtime.view_cut import Cut
 
     s = bunny_store
     h, plan = s.hierarchy(), s.completion_plan()
@@ -183,13 +184,37 @@ def test_chunked_bounds_equal_the_unchunked_formulas(bunny_store, white):
                                 s.faces[:, [1, 0]], s.faces[:, [2, 1]], s.faces[:, [0, 2]]], axis=0)
     np.testing.assert_array_equal(np.c_[v, q], old_pairs[old_pairs[:, 0] != old_pairs[:, 1]])
     np.testing.assert_array_equal(v[starts], np.unique(v))
-    d = node_bounds.detail_bounds(h, c, white, plan, rings, levels)
+    d = node_bounds.detail_bounds(h, c, white, plan, node_bounds.vertex_adjacency(s.faces), levels)
+    np.testing.assert_array_equal(d, node_bounds.detail_bounds(h, c, white, plan, Cut.base(h, s.faces).leaf_adjacency,
+                                                               levels))  # the same edges in leaf order
     ms = node_bounds.detail_mean_square(h, c, white, plan, levels)
     d_ref, ms_ref = old_detail_bounds(h, c, white, plan, s.faces, levels)
     assert d.shape == d_ref.shape and d.dtype == np.float32
     np.testing.assert_allclose(d, d_ref, rtol=1e-5, atol=1e-6 * d_ref.max())
     np.testing.assert_allclose(ms, ms_ref, rtol=1e-4, atol=1e-10 * ms_ref.max())
     np.testing.assert_array_equal(node_bounds.coefficient_boxes(h, c, white, levels), old_boxes(h, c, white, levels))
+
+
+@pytest.mark.warp_debug
+@pytest.mark.parametrize("C,n", [(1, 1), (3, 1), (1, 16), (3, 9)])
+def test_bound_kernels_equal_the_numpy_formulas_on_every_store_kind(bunny_store, C, n):
+    """``lodprt.kernels.node_bounds`` (both kernels, sliced over threads) against the numpy formulas above, on 1 or
+    3 channels and 1 or n^2 coefficients (a smooth field plus a step, so that both S-2 terms are nonzero)."""
+    from lodprt.runtime import node_bounds
+
+    s = bunny_store
+    h, plan = s.hierarchy(), s.completion_plan()
+    levels = node_bounds.height_levels(h)
+    rng = np.random.default_rng(C * 100 + n)
+    p = s.positions.astype(np.float32)
+    c = (p[:, :1, None] * rng.normal(size=(1, C, n)) + (p[:, 1:2, None] > 0.1) * rng.normal(size=(1, C, n)))
+    c = c.astype(np.float32)
+    d = node_bounds.detail_bounds(h, c, 0.7, plan, node_bounds.vertex_adjacency(s.faces), levels)
+    ms = node_bounds.detail_mean_square(h, c, 0.7, plan, levels)
+    d_ref, ms_ref = old_detail_bounds(h, c, 0.7, plan, s.faces, levels)
+    assert d.shape == d_ref.shape == (h.num_nodes - h.num_vertices, C) and (d_ref > 0).any()
+    np.testing.assert_allclose(d, d_ref, rtol=1e-5, atol=1e-6 * d_ref.max())
+    np.testing.assert_allclose(ms, ms_ref, rtol=1e-4, atol=1e-8 * ms_ref.max())  # float32 sums in another order
 
 
 def grid_with_a_large_ring(n: int = 50):

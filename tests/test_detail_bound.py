@@ -28,7 +28,7 @@ def case(bunny_bake):
     c = store.complete(4).astype(np.float32)
     white = 2.0
     plan = store.completion_plan()
-    d = node_bounds.detail_bounds(h, c, white, plan, node_bounds.leaf_rings(store.faces),
+    d = node_bounds.detail_bounds(h, c, white, plan, node_bounds.vertex_adjacency(store.faces),
                                   node_bounds.height_levels(h))
     return store, h, c, white, plan, d
 

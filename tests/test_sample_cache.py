@@ -108,6 +108,24 @@ def test_run_time_memory_does_not_grow_with_the_samples(tmp_path):
     assert peaks[(5, 1, 5)] - peaks[(1, 1, 1)] < 4 * per, (peaks, per)  # all 25 would add 24 x per
 
 
+@pytest.mark.warp_debug
+def test_direct_field_in_many_slices_equals_one_launch(store, monkeypatch):
+    """The per-sample shadow rays and Phong SH run in slices of referenced rows on every core, each with its own
+    buffers: slices of 97 rows give the bit-identical visibility, D_j V_j and M-2 residual of one launch."""
+    from lodprt.runtime import direct_light
+
+    direct = direct_light.DirectLight(store, "cpu")
+    c = np.random.default_rng(1).normal(size=(store.num_vertices, direct.channels, direct.ncoef)).astype(np.float32)
+    one = direct.direct_field(2), direct.split(2, c)
+    monkeypatch.setattr(direct_light, "SLICE_ROWS", 97)
+    many = direct.direct_field(2), direct.split(2, c)
+    assert len(direct.referenced) > 4 * 97 and (one[0][1] != 0).any()
+    for a, b in zip(one, many):
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+    np.testing.assert_array_equal(one[1][1][direct.referenced], c[direct.referenced] - one[0][1][direct.referenced])
+
+
 def test_direct_only_store_keeps_no_coefficients_and_the_same_bounds(store):
     """M-1 on a direct-only store reads no sample coefficients: the slots hold none and no sample is completed,
     yet the per-node bounds (S-2 detail, E-1 mean square, the lit flags) are exactly those made from the completed
@@ -121,7 +139,7 @@ def test_direct_only_store_keeps_no_coefficients_and_the_same_bounds(store):
     C, n = rt.samples.C, rt.samples.n
     assert n > 1 and rt.samples.bytes_per_slot() < store.num_vertices * 4 * C * n / 4  # bounds only: no coefficients
     h, plan, white = rt.h, store.completion_plan(), rt.white
-    levels, rings = node_bounds.height_levels(h), node_bounds.leaf_rings(rt.faces)
+    levels, rings = node_bounds.height_levels(h), node_bounds.vertex_adjacency(rt.faces)
     direct = rt.lighting.direct
     for slot in rt.used_slots:
         k = int(rt.samples.slot_sample[slot])

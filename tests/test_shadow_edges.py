@@ -108,7 +108,7 @@ def test_footprint_matches_the_kernel(bars):
     nodes = nodes[nodes >= rt.h.num_vertices][:500]
     ne = rt.node_errors(nodes)
     seen = ~ne.culled
-    got = sphere_pixels(rt.node_pos[nodes], rt.radius[nodes], rt.vp, rt.focal_px())
+    got = sphere_pixels(rt.node_pos(nodes), rt.radius[nodes], rt.vp, rt.focal_px())
     np.testing.assert_allclose(got[seen], np.pi * ne.footprint[seen] ** 2, rtol=2e-4)
 
 

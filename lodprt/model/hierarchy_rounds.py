@@ -130,20 +130,33 @@ class KernelThreads:
         self.workers = max(1, int(workers))
         self.pool = concurrent.futures.ThreadPoolExecutor(self.workers - 1) if self.workers > 1 else None
 
+    def __enter__(self) -> "KernelThreads":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def close(self) -> None:
         if self.pool is not None:
             self.pool.shutdown()
             self.pool = None
 
     def launch(self, kernel, dim: int, inputs: list, work: np.ndarray | None = None) -> None:
-        """``kernel`` over items ``0..dim-1`` (``inputs`` after ``first``), in slices of about equal ``work``
-        (cumulative (dim + 1,), e.g. the corner CSR start; None: equal counts), ``SLICES`` per thread (each thread
-        takes the next slice when it is done with one: a core shared with another process does fewer); one slice
-        below ``SPLIT_MIN`` items."""
+        """``kernel`` over items ``0..dim-1`` (``inputs`` after ``first``) on the CPU, in ``slices``."""
         wp = warp()
+        self.slices(lambda a, b: wp.launch(kernel, dim=b - a, device=DEVICE, inputs=[a] + inputs), dim, work)
+
+    def slices(self, run, dim: int, work: np.ndarray | None = None, most: int | None = None) -> None:
+        """``run(a, b)`` over slices ``a:b`` of items ``0..dim-1`` of about equal ``work`` (cumulative (dim + 1,),
+        e.g. the corner CSR start; None: equal counts), ``SLICES`` per thread (each thread takes the next slice
+        when it is done with one: a core shared with another process does fewer); one slice below ``SPLIT_MIN``
+        items; with ``most``, no slice of more than ``most`` items (bounded per-slice buffers). ``run`` must write
+        only its own items' outputs (a Warp CPU launch on views of them, say)."""
         parts = 1
         if self.pool is not None and dim >= SPLIT_MIN:
             parts = min(SLICES * self.workers, max(self.workers, dim // SPLIT_MIN))
+        if most is not None:
+            parts = max(parts, -(-dim // max(int(most), 1)))
         if work is None:
             cuts = np.linspace(0, dim, parts + 1).astype(np.int64)
         else:
@@ -158,7 +171,7 @@ class KernelThreads:
                     ab = next(todo, None)
                 if ab is None:
                     return
-                wp.launch(kernel, dim=ab[1] - ab[0], device=DEVICE, inputs=[ab[0]] + inputs)
+                run(*ab)
 
         futures = [self.pool.submit(drain) for _ in range(self.workers - 1)] if parts > 1 else []
         try:

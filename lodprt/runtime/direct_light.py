@@ -24,9 +24,12 @@ from __future__ import annotations
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.model.hierarchy_rounds import KernelThreads
 
 INTERPOLATIONS = ("direct", "direct-agree", "direct-blend", "thesis")
 DEFAULT_INTERPOLATION = "direct"
+#: referenced rows a slice of a sample's shadow rays and Phong SH takes at once (its buffers: 4 x C x ncoef bytes a row)
+SLICE_ROWS = 1 << 18
 
 
 def check_interpolation(name: str) -> str:
@@ -85,10 +88,11 @@ class DirectLight:
         self.lit = np.zeros(0, np.int32)  # the last ``add``'s rows: bit li where light li reaches them (M-6)
 
     # -- per sample (M-2) ----------------------------------------------------------------------------------------
-    def _at_sample(self, sample: int, with_direct: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        """(visibility states (V,) uint8, and with ``with_direct`` D_j V_j (K, C, ncoef) float32 at the referenced
-        vertices, else None) of light sample ``sample``: the bake's shadow rays and Phong SH (kernels.visibility,
-        kernels.shading) in the store's channel layout, unreferenced vertices BACK_FACING."""
+    def _at_sample(self, sample: int, target: np.ndarray | None = None, sign: float = 1.0) -> np.ndarray:
+        """Visibility states (V,) uint8 of light sample ``sample`` (the bake's shadow rays, kernels.visibility;
+        unreferenced vertices BACK_FACING); with ``target`` (V, C, ncoef) float32, ``sign`` x D_j V_j (Phong SH,
+        kernels.shading, in the store's channel layout) added to it at the referenced vertices. On the CPU in
+        slices of at most ``SLICE_ROWS`` rows on every core, each with its own buffers (no (K, ...) copy)."""
         from lodprt.kernels import shading as kshade
         from lodprt.kernels import visibility as kvis
 
@@ -96,40 +100,44 @@ class DirectLight:
         light = wp.vec3(*map(float, self.store.light_positions[sample]))
         K = len(self.referenced)
         vis = wp.zeros(K, dtype=wp.uint8, device=dev)
-        wp.launch(kvis.shadow_rays, dim=K, inputs=[self.mesh.id, self.points, self.normals, self.ref_ids, light,
-                                                    self.offset], outputs=[vis], device=dev)
+
+        def rows(a, b):  # the bake's rays, then Phong SH, for referenced rows a:b (views: a slice writes its own)
+            ids = self.ref_ids[a:b]
+            wp.launch(kvis.shadow_rays, dim=b - a, inputs=[self.mesh.id, self.points, self.normals, ids, light,
+                                                           self.offset], outputs=[vis[a:b]], device=dev)
+            if target is None:
+                return
+            direct = wp.zeros((b - a, self.channels, self.ncoef), dtype=wp.float32, device=dev)
+            scratch = wp.zeros((b - a, self.ncoef), dtype=wp.float32, device=dev)  # bands <= the output's
+            wp.launch(kshade.phong_sh, dim=b - a, inputs=[self.points, self.normals, self.material_id, ids, vis[a:b],
+                                                          self.kd_stored, self.ks, self.zonal, light, self.falloff,
+                                                          self.radius, scratch], outputs=[direct], device=dev)
+            target[self.referenced[a:b]] += np.float32(sign) * direct.numpy()
+
+        if dev == "cpu":  # a CPU launch runs on one thread: slices on every core
+            with KernelThreads(None) as threads:
+                threads.slices(rows, K, most=SLICE_ROWS)
+        else:
+            rows(0, K)
         states = np.full(self.num_vertices, int(kvis.BACK_FACING), np.uint8)
         states[self.referenced] = vis.numpy()
-        if not with_direct:
-            return states, None
-        direct = wp.zeros((K, self.channels, self.ncoef), dtype=wp.float32, device=dev)
-        order = self.store.sh_order
-        wp.launch(kshade.phong_sh, dim=K, inputs=[self.points, self.normals, self.material_id, self.ref_ids, vis,
-                                                  self.kd_stored, self.ks, self.zonal, light, self.falloff,
-                                                  self.radius, wp.zeros((K, order * order), dtype=wp.float32,
-                                                                        device=dev)],
-                  outputs=[direct], device=dev)
-        return states, direct.numpy()
+        return states
 
     def split(self, sample: int, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(visibility (V,) uint8, residual (V, C, ncoef) float32) of light sample ``sample`` whose completed
         coefficients are ``coeffs`` (V, C, ncoef): M-2's R_j = S_j - D_j V_j at the referenced vertices
         (``_at_sample``), unreferenced vertices BACK_FACING with their coefficients as given. A GI store's only:
         a direct-only store keeps no coefficients and takes its visibility from ``direct_field``."""
-        states, direct = self._at_sample(sample, True)
-        residual = np.asarray(coeffs, np.float32).copy()
-        residual[self.referenced] -= direct
-        return states, residual
+        residual = np.array(coeffs, np.float32)
+        return self._at_sample(sample, residual, -1.0), residual
 
     def direct_field(self, sample: int) -> tuple[np.ndarray, np.ndarray]:
         """(visibility states (V,) uint8, D_j V_j (V, C, ncoef) float32) of light sample ``sample``, 0 at the
         vertices no face uses: on a direct-only store the field M-1 draws with the light on the sample (the light
         cut's completion is linear between the vertices it kept, the drawn field is not), made without completing
         the sample."""
-        states, direct = self._at_sample(sample, True)
         out = np.zeros((self.num_vertices, self.channels, self.ncoef), np.float32)
-        out[self.referenced] = direct
-        return states, out
+        return self._at_sample(sample, out), out
 
     # -- per frame (M-1) -----------------------------------------------------------------------------------------
     def add(self, vid, lights, colors, light_slots, light_weights, sample_vis, coeffs, *, eye=None, radiance=None,

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from lodprt.devices import warp
 from lodprt.model.completion import CHUNK
 from lodprt.model.hierarchy import node_heights
+from lodprt.model.hierarchy_rounds import KernelThreads, warp_view
 
 
 def radiance_bound(r: np.ndarray, C: int, n: int) -> np.ndarray:
@@ -24,43 +26,74 @@ def radiance_bound(r: np.ndarray, C: int, n: int) -> np.ndarray:
     return out
 
 
-def detail_bounds(h, c: np.ndarray, white: float, plan, rings: tuple, levels: list) -> np.ndarray:
+def detail_bounds(h, c: np.ndarray, white: float, plan, adjacency: tuple, levels: list) -> np.ndarray:
     """S-2 for one light sample's completed coefficients ``c`` (V, C, ncoef): for each internal node, the largest
     radiance difference toward any view direction (``radiance_bound``) of (a) C(v) - sum_j w_j C(q_j) over the
     collapses in its subtree (T-15 weights over the ring the collapse removed v from) and (b) C(v) - C(q) over its
-    leaves v and their original neighbours q (``rings = leaf_rings(faces)``), in units of ``white``: (N - V, C)
+    leaves v and their original neighbours q (``adjacency``: ``vertex_adjacency(faces)``, or the Cut's
+    ``leaf_adjacency``, the same edges in leaf order), in units of ``white``: (N - V, C)
     float32. (a) is zero where the completed field is linear (T-15 has linear precision); (b) is one edge's step,
     small on smooth fields and large at a shadow or highlight boundary that runs next to the subtree (between two
     subtrees, where neither's own collapses see it). One number per channel keeps the per-frame read to a few
-    values a node. Both terms are made ``CHUNK`` collapses or leaves at a time (no copy of ``c``)."""
+    values a node. Both terms are Warp kernels (``lodprt.kernels.node_bounds``) sliced over the cores, with no copy
+    of a float32 ``c``."""
     V, N = h.num_vertices, h.num_nodes
     _, C, n = c.shape
     if N == V:
         return np.zeros((0, C), np.float32)
     c0, c1 = h.children[:, 0], h.children[:, 1]
-    c = c.reshape(V, C * n)
     d = np.zeros((N, C), np.float32)
-    leaf_steps(d, c, np.float32(white), rings, C, n)
-    for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
-        rows = slice(start, min(start + CHUNK, N - V))
-        res = (c[plan.vertex[rows]] - plan.interpolate(c, rows)) / np.float32(white)  # T-15 residual
-        d[V + rows.start:V + rows.stop] = radiance_bound(res, C, n)
+    with KernelThreads(None) as threads:
+        flat = coefficient_rows(c)
+        leaf_steps(d, flat, white, adjacency, threads)
+        residual_bounds(plan, flat, white, d[V:], threads)  # plan row m is the collapse of node V + m
     for nodes in levels:
         d[nodes] = np.maximum(d[nodes], np.maximum(d[c0[nodes]], d[c1[nodes]]))
     return d[V:]
 
 
-def leaf_steps(d: np.ndarray, c: np.ndarray, white, rings: tuple, C: int, n: int) -> None:
+def coefficient_rows(c: np.ndarray):
+    """A Warp view of ``c`` (V, C, n) as (V, C * n) float32 rows (no copy when it is float32 and contiguous)."""
+    V = c.shape[0]
+    return warp_view(np.asarray(c, np.float32).reshape(V, -1), warp().float32)
+
+
+def residual_bounds(plan, c, white: float, out: np.ndarray, threads: KernelThreads) -> None:
+    """S-2 (a) into ``out`` (M, C) float32: ``radiance_bound`` of the T-15 residual C(v) - sum_j w_j C(q_j) of
+    every plan row, in units of ``white``, for coefficient rows ``c`` (``coefficient_rows``)."""
+    from lodprt.kernels import node_bounds as kb
+
+    wp = warp()
+    M = len(plan.vertex)
+    if out.shape[0] != M or c.shape[1] % max(out.shape[1], 1):
+        raise ValueError(f"residual_bounds: out {out.shape} does not fit {M} plan rows of {c.shape[1]} coefficients")
+    threads.launch(kb.residual_bounds, M, [warp_view(plan.vertex, wp.int32), warp_view(plan.ring_ptr, wp.int64),
+                                            warp_view(plan.ring_ids, wp.int32), warp_view(plan.ring_w, wp.float32),
+                                            c, np.float32(1.0 / white), warp_view(out, wp.float32)],
+                   work=plan.ring_ptr)
+
+
+def leaf_steps(d: np.ndarray, c, white: float, adjacency: tuple, threads: KernelThreads) -> None:
     """S-2 (b) into ``d`` (N, C) at the leaves: the largest ``radiance_bound`` of (C(v) - C(q)) / white over the
-    original neighbours q of each leaf v (``rings = leaf_rings(faces)``, c (V, C * n)), ``CHUNK`` leaves (whole
-    runs) at a time, so the largest (edges, C * n) array has a chunk's edges."""
-    ring_v, ring_q, starts = rings
-    ends = np.r_[starts[1:], len(ring_v)]
-    for a in range(0, len(starts), CHUNK):
-        b = min(a + CHUNK, len(starts))
-        lo, hi = int(starts[a]), int(ends[b - 1])
-        step = c[ring_v[lo:hi]] / white - c[ring_q[lo:hi]] / white
-        d[ring_v[starts[a:b]]] = np.maximum.reduceat(radiance_bound(step, C, n), starts[a:b] - lo, axis=0)
+    original neighbours q of each leaf v, for ``adjacency = (vertex of each row (R,) int32, CSR offsets (R + 1,)
+    int64, neighbours (E,) int32)`` and ``c`` from ``coefficient_rows``."""
+    from lodprt.kernels import node_bounds as kb
+
+    wp = warp()
+    rows, ptr, nbr = adjacency
+    if len(ptr) != len(rows) + 1 or (len(ptr) and ptr[-1] != len(nbr)):
+        raise ValueError(f"leaf_steps: {len(rows)} rows, {len(ptr)} offsets and {len(nbr)} neighbours do not fit")
+    ptr = np.asarray(ptr, np.int64)
+    threads.launch(kb.leaf_step_bounds, len(rows), [warp_view(rows, wp.int32), warp_view(ptr, wp.int64),
+                                                    warp_view(nbr, wp.int32), c, np.float32(1.0 / white),
+                                                    warp_view(d, wp.float32)], work=ptr)
+
+
+def vertex_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``leaf_rings(faces)`` as an adjacency CSR: (the vertex of each row (R,) int32, offsets (R + 1,) int64,
+    neighbours (E,) int32), one row per vertex that has a neighbour."""
+    v, q, starts = leaf_rings(faces)
+    return v[starts], np.r_[starts, len(v)].astype(np.int64), q
 
 
 def detail_mean_square(h, c: np.ndarray, white: float, plan, levels: list) -> np.ndarray:
@@ -74,12 +107,13 @@ def detail_mean_square(h, c: np.ndarray, white: float, plan, levels: list) -> np
     if N == V:
         return np.zeros((0, C), np.float32)
     c0, c1 = h.children[:, 0], h.children[:, 1]
-    c = c.reshape(V, C * n)
+    r = np.empty((N - V, C), np.float32)
+    with KernelThreads(None) as threads:
+        residual_bounds(plan, coefficient_rows(c), white, r, threads)  # plan row m is the collapse of node V + m
     s = np.zeros((N, C), np.float64)
-    for start in range(0, N - V, CHUNK):  # plan row m is the collapse of node V + m
-        rows = slice(start, min(start + CHUNK, N - V))
-        res = (c[plan.vertex[rows]] - plan.interpolate(c, rows)) / np.float32(white)  # T-15 residual
-        s[V + rows.start:V + rows.stop] = radiance_bound(res, C, n) ** 2
+    s[V:] = r
+    del r
+    s[V:] **= 2
     for nodes in levels:
         s[nodes] += s[c0[nodes]] + s[c1[nodes]]
     leaves = np.maximum(h.leaf_range[V:, 1] - h.leaf_range[V:, 0], 1)
@@ -123,9 +157,9 @@ def leaf_rings(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def height_levels(h) -> list[np.ndarray]:
-    """Internal nodes grouped by height (children always on lower levels), lowest first."""
+    """Internal nodes grouped by height (children always on lower levels), lowest first (int32 ids)."""
     hk = node_heights(h)
-    order = np.argsort(hk, kind="stable")
+    order = np.argsort(hk, kind="stable").astype(np.int32 if len(hk) < 2**31 else np.int64)
     bounds = np.searchsorted(hk[order], np.arange(1, hk.max() + 2)) if len(hk) else np.zeros(1, np.int64)
     return [order[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
 

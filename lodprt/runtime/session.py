@@ -152,11 +152,8 @@ class Runtime:
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
         self._synced = -1  # the sample cache's version the device arrays hold
-        # per-node geometry for the error terms (float32: what the kernels read)
-        self.node_pos = np.take(self.positions, h.vertex, axis=0)
-        internal = h.children[:, 1] >= 0
-        self.node_collapsed = np.take(self.positions, h.vertex[np.maximum(h.children[:, 1], 0)], axis=0)
-        self.node_collapsed[~internal] = self.node_pos[~internal]
+        # per-node geometry for the error terms (float32: what the kernels read; node positions are gathered from
+        # the vertex positions through h.vertex, in the kernels and in ``node_pos``)
         # S-3: the error vector's direction at the subtree's accumulated deviation (one collapse's vector measures
         # one step; a coarse node stands for all the steps under it)
         self._levels = node_bounds.height_levels(h)
@@ -209,8 +206,9 @@ class Runtime:
         if key not in cache.derived:
             rows, levels, white = h.num_nodes - h.num_vertices, self._levels, self.white
             if key == "detail":
-                plan, rings = self.store.completion_plan(), node_bounds.leaf_rings(self.faces)
-                cache.derive("detail", lambda c: node_bounds.detail_bounds(h, c, white, plan, rings, levels), rows,
+                # S-2 (b)'s edges: the Cut's leaf-order adjacency (the same edges, no second copy)
+                plan, adj = self.store.completion_plan(), self.refinement.cut.leaf_adjacency
+                cache.derive("detail", lambda c: node_bounds.detail_bounds(h, c, white, plan, adj, levels), rows,
                              (self.channels,), np.float32)
             else:
                 cache.derive("boxes", lambda c: node_bounds.coefficient_boxes(h, c, white, levels), rows,
@@ -262,9 +260,11 @@ class Runtime:
         # on the CPU the Warp arrays wrap the float32 numpy arrays (no second copy)
         v3 = lambda a: wp.array(a, dtype=wp.vec3, device=dev, copy=dev != "cpu")  # noqa: E731
         f1 = lambda a: wp.array(a, dtype=wp.float32, device=dev, copy=dev != "cpu")  # noqa: E731
+        i1 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=dev,  # noqa: E731
+                                copy=dev != "cpu")
         self._wp = wp
         self._d = {
-            "node_pos": v3(self.node_pos), "node_collapsed": v3(self.node_collapsed),
+            "vertex": i1(self.h.vertex), "children": i1(self.h.children),
             "error_vector": v3(self.error_vector), "axis": v3(self.axis), "half": f1(self.half),
             "radius": f1(self.radius), "positions": v3(self.positions), "normals": v3(self.normals),
         }
@@ -376,7 +376,7 @@ class Runtime:
             bounds = self._kernel_bounds(exact)
             mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height)
             self._launch(kr.view_errors, K, [
-                wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["node_pos"], d["node_collapsed"],
+                wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["positions"], d["vertex"], d["children"],
                 d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
@@ -389,6 +389,10 @@ class Runtime:
             ], outs)
         culled, err, geo, lumi, foot, det = (o.numpy() for o in outs)
         return NodeErrors(culled.astype(bool), *(a.astype(np.float64) for a in (err, geo, lumi, foot, det)))
+
+    def node_pos(self, nodes) -> np.ndarray:
+        """(K, 3) float32 positions of the vertices of ``nodes`` (each node stands at its vertex)."""
+        return self.positions[self.h.vertex[nodes]]
 
     def focal_px(self) -> float:
         """Focal length of the camera in pixels: (height / 2) / tan(fov / 2)."""
@@ -526,7 +530,7 @@ class Runtime:
         focal = self.focal_px()
 
         def weight(nodes):
-            return area_weight(sphere_pixels(self.node_pos[nodes], self.radius[nodes], self.vp, focal), area_ref)
+            return area_weight(sphere_pixels(self.node_pos(nodes), self.radius[nodes], self.vp, focal), area_ref)
 
         nodes, err = shadow_edge_errors(self.h, self.cut.anc, vid, step, weight)
         if ref.extra is None or len(ref.extra) != self.h.num_nodes:

@@ -64,6 +64,12 @@ class Cut:
         return cls(hierarchy, faces, a)
 
     @property
+    def leaf_adjacency(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The original edges as (vertex of each row (V,) int32 = the leaf order, offsets (V+1,) int64, neighbours
+        (E,) int32): ``node_bounds.vertex_adjacency``'s edges, rows in leaf order (shared, not copied)."""
+        return self.h.leaf_order, self._ptr, self._nbr
+
+    @property
     def edge_offsets(self) -> np.ndarray:
         """(V+1,) int64 CSR offsets of the original edges, rows in depth-first leaf order: the edges leaving the
         leaves of node ``k`` are entries ``edge_offsets[leaf_range[k, 0]]:edge_offsets[leaf_range[k, 1]]``."""
@@ -317,13 +323,15 @@ class Cut:
 
             wp = warp()
             h = self.h
-            # read-only inputs: on the CPU they wrap the int32 arrays already held (no second copy, docs/SCALE.md)
+            # read-only inputs: on the CPU they wrap the arrays already held (no second copy, docs/SCALE.md)
             i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device,  # noqa: E731
                                      copy=device != "cpu")
             i2 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, ndim=2, device=device,  # noqa: E731
                                     copy=device != "cpu")
+            i64 = lambda a, ndim: wp.array(np.ascontiguousarray(a, np.int64), dtype=wp.int64, ndim=ndim,  # noqa: E731
+                                           device=device, copy=device != "cpu")
             d = {"children": i2(h.children), "parent": i32(h.parent), "creation": i32(h.creation),
-                 "leaf_order": i32(h.leaf_order), "leaf_range": i2(h.leaf_range), "edge_ptr": i32(self._ptr),
+                 "leaf_order": i32(h.leaf_order), "leaf_range": i64(h.leaf_range, 2), "edge_ptr": i64(self._ptr, 1),
                  "edge_nbr": i32(self._nbr), "stack": wp.empty(max(h.num_nodes, 1), dtype=wp.int32, device=device),
                  "result": wp.zeros(3, dtype=wp.int32, device=device)}
             if device == "cpu":
