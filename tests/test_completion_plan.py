@@ -217,6 +217,31 @@ def test_bound_kernels_equal_the_numpy_formulas_on_every_store_kind(bunny_store,
     np.testing.assert_allclose(ms, ms_ref, rtol=1e-4, atol=1e-8 * ms_ref.max())  # float32 sums in another order
 
 
+def test_residuals_are_shared_per_field_and_never_stale(bunny_store, monkeypatch):
+    """S-2 and E-1 of one field share one pass of the residual kernel; another field (even one made at the freed
+    field's address, or the same one at another white) gets its own."""
+    from lodprt.runtime import node_bounds
+
+    s = bunny_store
+    plan = s.completion_plan()
+    calls = []
+    original = node_bounds.residual_bounds
+    monkeypatch.setattr(node_bounds, "residual_bounds", lambda *a: calls.append(1) or original(*a))
+    c = s.complete(4, dtype=np.float32)
+    r = node_bounds.collapse_residuals(plan, c, 1.0)
+    assert node_bounds.collapse_residuals(plan, c, 1.0) is r and len(calls) == 1
+    assert not r.flags.writeable
+    np.testing.assert_allclose(node_bounds.collapse_residuals(plan, c, 2.0), r / 2, rtol=1e-6)
+    for k in (5, 6, 7):  # fields made and freed in turn: each compared with a fresh pass of the kernel
+        c = s.complete(k, dtype=np.float32)
+        got = node_bounds.collapse_residuals(plan, c, 1.0)
+        fresh = np.empty_like(got)
+        with node_bounds.KernelThreads(1) as threads:
+            original(plan, node_bounds.coefficient_rows(c), 1.0, fresh, threads)
+        np.testing.assert_array_equal(got, fresh)
+        del c
+
+
 def grid_with_a_large_ring(n: int = 50):
     """An n x n grid's hierarchy (rim kept), with one collapse's ring widened to every vertex no collapse removes
     (the rim's 4 n - 4 and the base mesh's): the builder caps valences (``MAX_VALENCE``), so rings this large come
