@@ -21,7 +21,7 @@ HERE = Path(__file__).resolve().parent
 #: Every benchmark, in the order they run (cheap ones first, so a broken script fails early).
 BENCHMARKS = ["visibility", "bake", "table1", "light_spacing", "hierarchy", "environment", "volume", "neighbourhood",
               "view_cut", "runtime", "render", "compression", "moving_lights", "gi", "scale",
-              "bake_memory"]
+              "bake_memory", "ten_million"]
 #: Arguments of the full runs the docs quote (not passed with --quick). gi.py --mitsuba needs Mitsuba 3
 #: (pip install '.[reference]'): the gi_mitsuba table quotes that part of gi.json.
 FULL_ARGS = {"view_cut": ["--frames", "48"], "gi": ["--mitsuba"], "moving_lights": ["--mitsuba"]}

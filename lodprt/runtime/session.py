@@ -152,8 +152,8 @@ class Runtime:
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
         self._synced = -1  # the sample cache's version the device arrays hold
-        # per-node geometry for the error terms (float32: what the kernels read; node positions are gathered from
-        # the vertex positions through h.vertex, in the kernels and in ``node_pos``)
+        # per-node geometry for the error terms (float32: what the kernels read; a node's position is its vertex's,
+        # gathered through h.vertex in the kernels and in ``node_pos``, not stored per node).
         # S-3: the error vector's direction at the subtree's accumulated deviation (one collapse's vector measures
         # one step; a coarse node stands for all the steps under it)
         self._levels = node_bounds.height_levels(h)
@@ -376,8 +376,8 @@ class Runtime:
             bounds = self._kernel_bounds(exact)
             mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height)
             self._launch(kr.view_errors, K, [
-                wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["positions"], d["vertex"], d["children"],
-                d["error_vector"], d["axis"], d["half"], d["radius"],
+                wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["positions"], d["vertex"],
+                d["children"], d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
