@@ -97,6 +97,41 @@ def test_csr_rings_are_the_float64_rings_rounded(bunny_floor, bunny_hierarchy):
     np.testing.assert_allclose(plan.interpolate(c, np.arange(100, 9000)), want, rtol=1e-5, atol=1e-5)
 
 
+def plan_as_dense(plan, R: int):
+    """The plan's CSR rings as dense (M, R) ids and weights (0 on the padding)."""
+    M = len(plan.vertex)
+    lens = np.diff(plan.ring_ptr)
+    mask = np.arange(R)[None, :] < lens[:, None]
+    ids, w = np.zeros((M, R), np.int64), np.zeros((M, R))
+    ids[mask], w[mask] = plan.ring_ids, plan.ring_w
+    return ids, w, mask
+
+
+@pytest.mark.warp_debug
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_weight_kernel_equals_the_numpy_rules(bunny_floor, bunny_hierarchy, dtype):
+    """``kernels.completion.ring_weights`` (through ``CompletionPlan``) against ``ring_weights``, the float64 numpy
+    reference, on every collapse of the bunny + floor: the same rule on every row (all four rules occur: T-15 inside,
+    boundary along the floor's edge, mean value and Shepard on the odd rings), the same sorted ring, the same
+    weights to float32 rounding; positions given in float32 or float64."""
+    h = bunny_hierarchy
+    pos, nrm = bunny_floor.positions.astype(dtype), bunny_floor.normals.astype(dtype)
+    plan = CompletionPlan(h, pos, nrm)
+    V, N = h.num_vertices, h.num_nodes
+    vertex = h.vertex[h.children[V:N, 1]]
+    ref_ids, ref_w, lens = dense_rings(h, pos, nrm)
+    R = ref_ids.shape[1]
+    mask = np.arange(R)[None, :] < lens[:, None]
+    p64, n64 = pos.astype(np.float64), nrm.astype(np.float64)
+    _, _, ref_rule = ring_weights(p64[vertex], p64[ref_ids], mask, n64[vertex])
+    assert set(np.unique(ref_rule)) == {0, 1, 2, 3}
+    np.testing.assert_array_equal(plan.rule, ref_rule)
+    ids, w, _ = plan_as_dense(plan, R)
+    np.testing.assert_array_equal(np.where(mask, ids, 0), np.where(mask, ref_ids, 0))
+    assert np.abs(w - np.where(mask, ref_w, 0)).max() <= 1e-6
+    np.testing.assert_allclose(w.sum(1)[lens > 0], 1.0, atol=1e-6)
+
+
 def test_complete_matches_the_float64_reference(bunny_store):
     s = bunny_store
     h, plan = s.hierarchy(), s.completion_plan()
@@ -115,6 +150,53 @@ def test_complete_matches_the_float64_reference(bunny_store):
         assert got32.dtype == np.float32
         assert np.abs(got32 - got).max() <= 1e-5 * scale
         np.testing.assert_array_equal(got32, plan.complete(ids, coeffs, s.num_vertices, dtype=np.float32, **cut))
+
+
+@pytest.mark.warp_debug
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("shape", [(), (1, 1), (3, 1), (1, 16), (3, 9)])
+@pytest.mark.parametrize("with_cut", [False, True])
+def test_wave_kernel_equals_the_dense_reference_on_every_store_kind(bunny_store, shape, dtype, with_cut):
+    """``kernels.completion.complete_wave`` (through ``CompletionPlan.complete``) against the dense float64
+    reference: 1 or 3 channels, 1 or n^2 coefficients, float32 or float64, with the sample's cut (dark nodes
+    dropped from the rings) and without one; the plan's own inputs are left as they were."""
+    s = bunny_store
+    h, plan = s.hierarchy(), s.completion_plan()
+    dense = dense_rings(h, s.positions, s.normals)
+    ids, _ = s.sample(4)
+    cut = s.cut_arrays(4)
+    coeffs = np.random.default_rng(len(shape)).normal(size=(len(ids),) + shape)
+    nodes, dark = np.asarray(cut["cut_nodes"]), np.asarray(cut["dark"], bool)
+    if not with_cut:  # no node dark: every ring neighbour counts
+        dark = np.zeros_like(dark)
+    before = [a.copy() for a in (plan.ring_ids, plan.ring_w, plan.vertex, plan.by_wave)]
+    ref = reference_complete(h, plan, dense, ids, coeffs, nodes, dark)
+    kw = {"cut_nodes": nodes, "dark": dark} if with_cut else {}
+    got = plan.complete(ids, coeffs.astype(dtype), s.num_vertices, dtype=dtype, **kw)
+    assert got.dtype == dtype and got.shape == (s.num_vertices,) + shape
+    tol = (1e-6 if dtype == np.float64 else 1e-5) * np.abs(ref).max()
+    assert np.abs(got - ref).max() <= tol
+    assert dark.any() == with_cut and (got[ref == 0] == 0).all()
+    for a, b in zip(before, (plan.ring_ids, plan.ring_w, plan.vertex, plan.by_wave)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_wave_kernel_refuses_what_it_would_index_past():
+    """The host checks shapes before a launch: an output of fewer rows than the hierarchy's vertices, or a mask
+    too short, is a clear error, not a write past an array's end."""
+    from lodprt.model.hierarchy_build import build_hierarchy
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [2, 0, 0], [2, 1, 0]], float)
+    faces = np.array([[0, 1, 2], [1, 3, 2], [1, 4, 3], [4, 5, 3]], np.int32)
+    normals = np.tile([0.0, 0.0, 1.0], (6, 1))
+    h = build_hierarchy(pos, faces, normals)
+    plan = CompletionPlan(h, pos, normals)
+    with pytest.raises(ValueError, match="at least the hierarchy's 6 vertices"):
+        plan.fill_waves(np.zeros((5, 1)), np.zeros(6, bool), np.zeros(6, bool))
+    with pytest.raises(ValueError, match="need 6"):
+        plan.fill_waves(np.zeros((6, 1)), np.zeros(5, bool), np.zeros(6, bool))
+    with pytest.raises(ValueError, match="float32 or float64"):
+        plan.fill_waves(np.zeros((6, 1), np.int32), np.zeros(6, bool), np.zeros(6, bool))
 
 
 def old_detail_bounds(h, c, white, plan, faces, levels):

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lodprt.devices import warp
 from lodprt.model.hierarchy import Hierarchy
 
 RULE_T15, RULE_MEAN_VALUE, RULE_SHEPARD, RULE_BOUNDARY = 0, 1, 2, 3
@@ -190,7 +191,7 @@ class CompletionPlan:
     at the same places: memory follows the real ring sizes (CSR), not the largest ring.
     """
 
-    def __init__(self, h: Hierarchy, positions: np.ndarray, normals: np.ndarray):
+    def __init__(self, h: Hierarchy, positions: np.ndarray, normals: np.ndarray, threads=None):
         self.h = h
         V = h.num_vertices
         internal = np.arange(V, h.num_nodes)
@@ -203,31 +204,38 @@ class CompletionPlan:
         self.ring_ids = np.empty(int(self.ring_ptr[-1]), np.int32)
         self.ring_w = np.empty(len(self.ring_ids), np.float32)
         self.rule = np.zeros(M, np.int8)
-        p, nrm = np.asarray(positions), np.asarray(normals)
-        # rings padded to the largest ring of their chunk (rows sorted by ring size), at most CHUNK rows and
-        # RING_ENTRIES padded entries a chunk: bounded memory, however large the largest ring
-        by_size = np.argsort(counts, kind="stable")
-        start = 0
-        while start < M:
-            r = max(int(counts[by_size[min(start + CHUNK, M) - 1]]), 1)
-            rows = by_size[start : start + min(CHUNK, max(RING_ENTRIES // r, 1))]
-            start += len(rows)
-            r = max(int(counts[rows].max()), 1)
-            mask = np.arange(r)[None, :] < counts[rows, None]
-            v = self.vertex[rows]
-            idx = np.repeat(v[:, None], r, axis=1)
-            take = offs[internal[rows]][:, None] + np.arange(r)[None, :]
-            idx[mask] = h.neighbours[take[mask]]
-            f64 = lambda a: a.astype(np.float64)  # noqa: E731
-            w, order, rule = ring_weights(f64(p[v]), f64(p[idx]), mask, f64(nrm[v]))
-            at = (self.ring_ptr[rows][:, None] + np.arange(r)[None, :])[mask]  # sorted: real neighbours first
-            self.ring_ids[at] = np.take_along_axis(idx, order, axis=1)[mask]
-            self.ring_w[at] = w[mask]
-            self.rule[rows] = rule
+        self.ring_ids[:] = h.neighbours[offs[V] : offs[h.num_nodes]]  # each row's ring, sorted by the kernel
+        if M:
+            self.weigh(positions, normals, threads)
         # waves: neighbours of a collapsed vertex were removed later (or never); coarse first
         self.wave = wave_numbers(self.vertex, self.ring_ptr, self.ring_ids, V)
         self.by_wave = np.argsort(self.wave, kind="stable").astype(np.int32)
         self.wave_ptr = np.searchsorted(self.wave[self.by_wave], np.arange(self.wave.max() + 2 if M else 1))
+
+    def weigh(self, positions: np.ndarray, normals: np.ndarray, threads=None) -> None:
+        """Sort every ring by angle and give it its weights and rule (``lodprt.kernels.completion.ring_weights``:
+        ``ring_weights`` above, row by row, in float64), sliced over ``threads`` (a ``KernelThreads``; None: every
+        core for this call)."""
+        from lodprt.kernels import completion as kc
+        from lodprt.model.hierarchy_rounds import KernelThreads, warp_view
+
+        wp = warp()
+        V = self.h.num_vertices
+        wide = np.float64 if np.float64 in (np.asarray(positions).dtype, np.asarray(normals).dtype) else np.float32
+        p, n = (np.ascontiguousarray(a, wide) for a in (positions, normals))  # float32 read as it is, no copy
+        if p.shape != (V, 3) or n.shape != (V, 3):
+            raise ValueError(f"completion plan: positions {p.shape} and normals {n.shape}, need ({V}, 3)")
+        vec = wp.vec3d if wide == np.float64 else wp.vec3
+        inputs = [warp_view(self.vertex, wp.int32), warp_view(self.ring_ptr, wp.int64), warp_view(p, vec),
+                  warp_view(n, vec), warp_view(self.ring_ids, wp.int32), warp_view(self.ring_w, wp.float32),
+                  warp_view(self.rule, wp.int8)]
+        own = threads is None
+        threads = KernelThreads(None) if own else threads
+        try:
+            threads.launch(kc.ring_weights, len(self.vertex), inputs, work=self.ring_ptr)
+        finally:
+            if own:
+                threads.close()
 
     @property
     def nbytes(self) -> int:
@@ -283,30 +291,32 @@ class CompletionPlan:
             dark_v = is_dark[active_ancestors(self.h, active)]
             out[dark_v & ~have] = 0.0
             have |= dark_v
-        flat_out = out.reshape(num_vertices, -1)
-        for w in range(1, len(self.wave_ptr) - 1):
-            rows = self.by_wave[self.wave_ptr[w] : self.wave_ptr[w + 1]]
-            rows = rows[~have[self.vertex[rows]]]
-            # a ring holds vertices of earlier waves only: chunks of one wave never read each other's writes
-            for start in range(0, len(rows), CHUNK):
-                part = rows[start : start + CHUNK]
-                flat_out[self.vertex[part]] = self.blend(flat_out, part, dark_v)  # T-15
-            have[self.vertex[rows]] = True
+        self.fill_waves(out.reshape(num_vertices, -1), have, dark_v)
         return out
 
-    def blend(self, c: np.ndarray, rows: np.ndarray, dark_v: np.ndarray) -> np.ndarray:
-        """T-15 for plan ``rows`` from the values ``c`` (V, K) of their rings, in ``c``'s dtype: weights of dark
-        neighbours (``dark_v`` (V,) bool) dropped and the rest renormalised (all of them when all are dark)."""
-        flat, filled, seg = ring_rows(self.ring_ptr, rows)
-        out = np.zeros((len(rows), c.shape[1]), c.dtype)
-        if not len(flat):
-            return out
-        nb = self.ring_ids[flat]
-        w = self.ring_w[flat].astype(c.dtype)
-        lit = np.where(dark_v[nb], 0, w)
-        total_lit = np.add.reduceat(lit, seg)
-        use_lit = np.repeat(total_lit > 0, np.diff(np.r_[seg, len(flat)]))
-        w = np.where(use_lit, lit, w)
-        w /= np.repeat(np.where(total_lit > 0, total_lit, np.add.reduceat(w, seg)), np.diff(np.r_[seg, len(flat)]))
-        out[filled] = np.add.reduceat(w[:, None] * c[nb], seg, axis=0)
-        return out
+    def fill_waves(self, out: np.ndarray, have: np.ndarray, dark_v: np.ndarray) -> None:
+        """T-15 into the rows of ``out`` (V, K) float32 or float64, C-contiguous, of every plan row's vertex not in
+        ``have`` (V,) bool, wave after wave (``lodprt.kernels.completion.complete_wave``, one launch a wave on the
+        CPU): each from its ring's values, dark neighbours (``dark_v`` (V,) bool) dropped and the rest renormalised
+        (all of them when all are dark). ``have`` is updated."""
+        from lodprt.kernels import completion as kc
+        from lodprt.model.hierarchy_rounds import warp_view
+
+        wp = warp()
+        V = self.h.num_vertices
+        if out.ndim != 2 or out.shape[0] < V or not out.flags.c_contiguous or out.dtype not in (np.float32,
+                                                                                               np.float64):
+            raise ValueError(f"completion output {out.dtype} {out.shape}: need C-contiguous float32 or float64 "
+                             f"rows for at least the hierarchy's {V} vertices")
+        if len(have) < V or len(dark_v) < V:
+            raise ValueError(f"completion masks of {len(have)} and {len(dark_v)} vertices: need {V}")
+        vert_dt = wp.float64 if out.dtype == np.float64 else wp.float32
+        fixed = [warp_view(self.vertex, wp.int32), warp_view(self.ring_ptr, wp.int64),
+                 warp_view(self.ring_ids, wp.int32), warp_view(self.ring_w, wp.float32),
+                 warp_view(dark_v, wp.uint8), warp_view(have, wp.uint8), warp_view(out, vert_dt)]
+        rows = warp_view(self.by_wave, wp.int32)
+        for w in range(1, len(self.wave_ptr) - 1):
+            lo, hi = int(self.wave_ptr[w]), int(self.wave_ptr[w + 1])
+            if hi > lo:  # T-15 (kernels.completion): a ring holds vertices of earlier waves only
+                wp.launch(kc.complete_wave, dim=hi - lo, device="cpu", inputs=[lo, rows] + fixed)
+            have[self.vertex[self.by_wave[lo:hi]]] = True

@@ -302,8 +302,11 @@ class Interreflection:
 
     def prepare_cut(self, tree) -> None:
         """Once per bake: the completion plan, the indirect cut (G-5) and the ring tables of G-6 for ``tree``."""
+        from lodprt.devices import load_kernels
+        from lodprt.kernels import completion as kc
         from lodprt.model.completion import CompletionPlan
 
+        load_kernels("cpu", kc)  # T-15 completion runs on the CPU: loaded before the sample threads launch it
         self.cut_state = CutState(tree, self, CompletionPlan(tree, self.positions, self.normals))
 
     def sample_cut(self, light, lightcut, threshold_deg: float):
