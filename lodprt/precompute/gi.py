@@ -122,6 +122,8 @@ class Interreflection:
         self.area = vertex_areas(scene.positions, scene.faces)  # G-8 energy weights
         kd = np.array([m.kd[: baker.channels] for m in scene.materials], np.float64)
         self.kd_v = kd[scene.material_id]  # (V, C)
+        # G-4: view-dependent indirect light only where some material reflects specularly (ks > 0)
+        self.specular = baker.ncoef > 1 and any(float(m.ks) > 0.0 for m in scene.materials)
         self.referenced = scene.referenced.copy()
         self.y0 = constant_coefficient()
         self.max_dist = 4.0 * float(scene.diagonal) + 1.0
@@ -177,7 +179,7 @@ class Interreflection:
         if keep is not None:
             keep.append(rad.numpy().astype(np.float64))
         total = np.zeros((self.V, b.channels))
-        spec_on = b.ncoef > 1
+        spec_on = self.specular
         ids = wp.array(gather_ids, dtype=wp.int32, device=b.device)
         specular = wp.zeros((len(gather_ids), b.channels, b.ncoef if spec_on else 1), dtype=wp.float32, device=b.device)
         for bounce in range(st.bounces):
@@ -210,7 +212,7 @@ class Interreflection:
         l_rms = math.sqrt(float(np.mean(direct[ref].mean(1) ** 2))) if ref.any() else 0.0
         tol = st.indirect_tolerance * l_rms  # G-9: the RMS error a pass may leave, tau L_rms
         total = np.zeros((self.V, b.channels))
-        spec_on = b.ncoef > 1
+        spec_on = self.specular
         spec_total, anc, counts = None, None, []
 
         def complete(ids, values):
