@@ -6,14 +6,14 @@ vertex normal (a stable insertion sort of the row's CSR ids, angles recomputed f
 weights on the plane of the fan's area-weighted normal, else the boundary rule on an open ring, else mean value,
 else Shepard; float64 maths, weights normalised to sum 1 and stored as float32.
 
-``complete_wave``: one wave of ``CompletionPlan.complete``. Thread i takes plan row ``rows[first + i]``; unless its
-collapsed vertex already has values (``have``), it writes the T-15 blend of its CSR ring,
+``complete_in_order``: ``CompletionPlan.complete``'s rows, wave after wave, in one thread (one launch: a completion
+between a GI bake's gathering passes does not wait for the interpreter lock once per wave). Unless a row's collapsed
+vertex already has values (``have``), it gets the T-15 blend of its CSR ring,
 
     T-15  c(p) = sum_j w_j c(q_j) / sum_j w_j,
 
 the sums over the ring neighbours that are not dark (all of them when every neighbour is dark). A ring holds
-vertices of earlier waves only, so the rows of one wave read no value another row of the wave writes: a launch, or
-slices of it on several threads, gives the same values as a loop over the rows. The value type (float32 or float64)
+vertices of earlier waves only, so every value a row reads is final when it is read. The value type (float32 or float64)
 is the output's; the float32 weights are widened to it, and the sums run in it, in ring order. Every loop runs from
 the CSR starts and ends and from the output's shape; the host checks that rows, ring ids and vertices lie inside
 the arrays they index.
@@ -88,47 +88,47 @@ def candidate_weight(positions: wp.array(dtype=Any), ids: wp.array(dtype=wp.int3
 
 
 @wp.kernel
-def complete_wave(
-    first: int,  # In: the index into ``rows`` of thread 0 (a slice of the wave)
-    rows: wp.array(dtype=wp.int32),  # In: the wave's plan rows
+def complete_in_order(
+    rows: wp.array(dtype=wp.int32),  # In: plan rows, wave after wave (``CompletionPlan.by_wave``)
     vertex: wp.array(dtype=wp.int32),  # In: (M,) the vertex each collapse removed
     ring_ptr: wp.array(dtype=wp.int64),  # In: (M + 1,) CSR start of each row's ring
     ring_ids: wp.array(dtype=wp.int32),  # In: ring vertex ids
     ring_w: wp.array(dtype=wp.float32),  # In: their T-15 weights
     dark: wp.array(dtype=wp.uint8),  # In: (V,) 1 where a vertex lies under a dark cut node
-    have: wp.array(dtype=wp.uint8),  # In: (V,) 1 where a vertex already has its values (kept, dark, or done)
-    out: wp.array2d(dtype=Any),  # In/Out: (V, K) values; rows of the wave's vertices written
+    have: wp.array(dtype=wp.uint8),  # In: (V,) 1 where a vertex already has its values (kept or dark)
+    out: wp.array2d(dtype=Any),  # In/Out: (V, K) values; the rows of the plan rows' vertices written
 ):
-    m = int(rows[first + wp.tid()])
-    v = int(vertex[m])
-    if have[v] != wp.uint8(0):
-        return
-    lo = int(ring_ptr[m])
-    hi = int(ring_ptr[m + 1])
-    zero = out.dtype(0.0)
-    lit = zero
-    every = zero
-    for j in range(lo, hi):
-        w = out.dtype(ring_w[j])
-        every += w
-        if dark[ring_ids[j]] == wp.uint8(0):
-            lit += w
-    use_lit = lit > zero
-    total = every
-    if use_lit:
-        total = lit
-    K = out.shape[1]
-    for k in range(K):
-        out[v, k] = zero
-    for j in range(lo, hi):
-        q = int(ring_ids[j])
-        if not use_lit or dark[q] == wp.uint8(0):
-            w = out.dtype(ring_w[j]) / total  # T-15, weights renormalised over the ring
+    for i in range(rows.shape[0]):  # one thread, in wave order: a ring holds vertices of earlier waves only
+        m = int(rows[i])
+        v = int(vertex[m])
+        if have[v] == wp.uint8(0):
+            lo = int(ring_ptr[m])
+            hi = int(ring_ptr[m + 1])
+            zero = out.dtype(0.0)
+            lit = zero
+            every = zero
+            for j in range(lo, hi):
+                w = out.dtype(ring_w[j])
+                every += w
+                if dark[ring_ids[j]] == wp.uint8(0):
+                    lit += w
+            use_lit = lit > zero
+            total = every
+            if use_lit:
+                total = lit
+            K = out.shape[1]
             for k in range(K):
-                out[v, k] = out[v, k] + w * out[q, k]
+                out[v, k] = zero
+            for j in range(lo, hi):
+                q = int(ring_ids[j])
+                if not use_lit or dark[q] == wp.uint8(0):
+                    w = out.dtype(ring_w[j]) / total  # T-15, weights renormalised over the ring
+                    for k in range(K):
+                        out[v, k] = out[v, k] + w * out[q, k]
 
-wp.overload(complete_wave, {"out": wp.array2d(dtype=wp.float32)})
-wp.overload(complete_wave, {"out": wp.array2d(dtype=wp.float64)})
+
+wp.overload(complete_in_order, {"out": wp.array2d(dtype=wp.float32)})
+wp.overload(complete_in_order, {"out": wp.array2d(dtype=wp.float64)})
 
 
 @wp.kernel

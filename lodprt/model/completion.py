@@ -296,7 +296,7 @@ class CompletionPlan:
 
     def fill_waves(self, out: np.ndarray, have: np.ndarray, dark_v: np.ndarray) -> None:
         """T-15 into the rows of ``out`` (V, K) float32 or float64, C-contiguous, of every plan row's vertex not in
-        ``have`` (V,) bool, wave after wave (``lodprt.kernels.completion.complete_wave``, one launch a wave on the
+        ``have`` (V,) bool, wave after wave (``lodprt.kernels.completion.complete_in_order``, one launch on the
         CPU): each from its ring's values, dark neighbours (``dark_v`` (V,) bool) dropped and the rest renormalised
         (all of them when all are dark). ``have`` is updated."""
         from lodprt.kernels import completion as kc
@@ -314,9 +314,6 @@ class CompletionPlan:
         fixed = [warp_view(self.vertex, wp.int32), warp_view(self.ring_ptr, wp.int64),
                  warp_view(self.ring_ids, wp.int32), warp_view(self.ring_w, wp.float32),
                  warp_view(dark_v, wp.uint8), warp_view(have, wp.uint8), warp_view(out, vert_dt)]
-        rows = warp_view(self.by_wave, wp.int32)
-        for w in range(1, len(self.wave_ptr) - 1):
-            lo, hi = int(self.wave_ptr[w]), int(self.wave_ptr[w + 1])
-            if hi > lo:  # T-15 (kernels.completion): a ring holds vertices of earlier waves only
-                wp.launch(kc.complete_wave, dim=hi - lo, device="cpu", inputs=[lo, rows] + fixed)
-            have[self.vertex[self.by_wave[lo:hi]]] = True
+        if len(self.by_wave):  # T-15 (kernels.completion), wave after wave
+            wp.launch(kc.complete_in_order, dim=1, device="cpu", inputs=[warp_view(self.by_wave, wp.int32)] + fixed)
+        have[self.vertex] = True
