@@ -181,6 +181,32 @@ def test_wave_kernel_equals_the_dense_reference_on_every_store_kind(bunny_store,
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("with_cut", [False, True])
+def test_rows_for_complete_their_targets_as_a_whole_completion_does(bunny_store, with_cut):
+    """Completing only ``rows_for(targets)`` gives the targets exactly the values of a whole completion (the rows
+    a ring reads are all there, in wave order), touches fewer rows for coarse targets, and leaves the vertices it
+    does not need at 0."""
+    s = bunny_store
+    h, plan = s.hierarchy(), s.completion_plan()
+    ids, coeffs = s.sample(4)
+    kw = s.cut_arrays(4) if with_cut else {}
+    whole = plan.complete(ids, coeffs, s.num_vertices, **kw)
+    rng = np.random.default_rng(7)
+    for targets in (h.vertex[h.roots], rng.choice(s.num_vertices, 50, replace=False), np.arange(s.num_vertices)):
+        rows = plan.rows_for(targets)
+        assert np.all(np.diff(plan.wave[rows]) >= 0)  # wave order
+        part = plan.complete(ids, coeffs, s.num_vertices, rows=rows, **kw)
+        np.testing.assert_array_equal(part[targets], whole[targets])
+        touched = np.zeros(s.num_vertices, bool)
+        touched[ids] = True
+        touched[plan.vertex[rows]] = True
+        assert (part[~touched] == 0).all()
+    assert len(plan.rows_for(h.vertex[h.roots])) < len(plan.vertex) // 10
+    assert len(plan.rows_for(np.arange(s.num_vertices))) == len(plan.vertex)
+    with pytest.raises(ValueError, match="outside the plan"):
+        plan.complete(ids, coeffs, s.num_vertices, rows=np.array([len(plan.vertex)]))
+
+
 def test_wave_kernel_refuses_what_it_would_index_past():
     """The host checks shapes before a launch: an output of fewer rows than the hierarchy's vertices, or a mask
     too short, is a clear error, not a write past an array's end."""

@@ -263,8 +263,23 @@ class CompletionPlan:
         counts = np.bincount(self.rule, minlength=len(RULE_NAMES)) / max(len(self.rule), 1)
         return {name: float(c) for name, c in zip(RULE_NAMES, counts)}
 
+    def rows_for(self, targets: np.ndarray) -> np.ndarray:
+        """The plan rows, in wave order, whose values completing the vertices ``targets`` reads: their own rows and,
+        from the finest wave back, the rows of every ring vertex a needed row reads (a ring holds vertices of
+        earlier waves only). ``complete(..., rows=rows_for(t))`` gives ``t`` the values a whole completion gives."""
+        need = np.zeros(self.h.num_vertices, bool)
+        need[np.asarray(targets)] = True
+        keep = np.zeros(len(self.vertex), bool)
+        for w in range(len(self.wave_ptr) - 2, 0, -1):
+            rows = self.by_wave[self.wave_ptr[w] : self.wave_ptr[w + 1]]
+            rows = rows[need[self.vertex[rows]]]
+            keep[rows] = True
+            flat, _, _ = ring_rows(self.ring_ptr, rows)
+            need[self.ring_ids[flat]] = True
+        return self.by_wave[keep[self.by_wave]]
+
     def complete(self, ids: np.ndarray, coeffs: np.ndarray, num_vertices: int, *, cut_nodes=None, dark=None,
-                 dtype=np.float64) -> np.ndarray:
+                 dtype=np.float64, rows: np.ndarray | None = None) -> np.ndarray:
         """(V, ...) coefficients of every vertex in ``dtype`` (float64 by default; the weights and every gather
         in it too) from the kept ``ids`` (K,) and their ``coeffs`` (K, ...).
 
@@ -272,6 +287,7 @@ class CompletionPlan:
         exactly 0 (all its leaves face away or lie in shadow: no radiance), and the others are completed from
         ring neighbours that are not dark (weights renormalised; all of them when every neighbour is dark).
         The weights of a ring are renormalised to sum 1 in ``dtype``, so equal neighbours complete exactly.
+        ``rows`` (from :meth:`rows_for`) completes only the vertices those rows read; the others stay 0.
         """
         coeffs = np.asarray(coeffs)
         out = np.zeros((num_vertices,) + coeffs.shape[1:], dtype)
@@ -291,14 +307,14 @@ class CompletionPlan:
             dark_v = is_dark[active_ancestors(self.h, active)]
             out[dark_v & ~have] = 0.0
             have |= dark_v
-        self.fill_waves(out.reshape(num_vertices, -1), have, dark_v)
+        self.fill_waves(out.reshape(num_vertices, -1), have, dark_v, rows)
         return out
 
-    def fill_waves(self, out: np.ndarray, have: np.ndarray, dark_v: np.ndarray) -> None:
+    def fill_waves(self, out: np.ndarray, have: np.ndarray, dark_v: np.ndarray, rows=None) -> None:
         """T-15 into the rows of ``out`` (V, K) float32 or float64, C-contiguous, of every plan row's vertex not in
         ``have`` (V,) bool, wave after wave (``lodprt.kernels.completion.complete_in_order``, one launch on the
         CPU): each from its ring's values, dark neighbours (``dark_v`` (V,) bool) dropped and the rest renormalised
-        (all of them when all are dark). ``have`` is updated."""
+        (all of them when all are dark); only plan ``rows`` (in wave order) when given. ``have`` is updated."""
         from lodprt.kernels import completion as kc
         from lodprt.model.hierarchy_rounds import warp_view
 
@@ -314,6 +330,9 @@ class CompletionPlan:
         fixed = [warp_view(self.vertex, wp.int32), warp_view(self.ring_ptr, wp.int64),
                  warp_view(self.ring_ids, wp.int32), warp_view(self.ring_w, wp.float32),
                  warp_view(dark_v, wp.uint8), warp_view(have, wp.uint8), warp_view(out, vert_dt)]
-        if len(self.by_wave):  # T-15 (kernels.completion), wave after wave
-            wp.launch(kc.complete_in_order, dim=1, device="cpu", inputs=[warp_view(self.by_wave, wp.int32)] + fixed)
-        have[self.vertex] = True
+        rows = self.by_wave if rows is None else np.asarray(rows, np.int32)
+        if len(rows) and (rows.min() < 0 or rows.max() >= len(self.vertex)):
+            raise ValueError(f"completion rows outside the plan's {len(self.vertex)} rows")
+        if len(rows):  # T-15 (kernels.completion), wave after wave
+            wp.launch(kc.complete_in_order, dim=1, device="cpu", inputs=[warp_view(rows, wp.int32)] + fixed)
+        have[self.vertex[rows]] = True

@@ -218,6 +218,9 @@ class Interreflection:
         def complete(ids, values):
             return cs.plan.complete(ids, values, self.V)  # T-15 from the gathering vertices
 
+        def predict(k, ids, values):  # T-15 of level k's vertices alone: the rows they read (G-9)
+            return cs.plan.complete(ids, values, self.V, rows=cs.level_rows[k])
+
         for bounce in range(st.bounces):
             if energies[0] <= 0.0:
                 break  # nothing is lit: no light to reflect
@@ -228,7 +231,7 @@ class Interreflection:
                 e = self._gather(wp.array(ids, dtype=wp.int32, device=b.device), previous, bounce, specular)
                 return e, specular.numpy().astype(np.float64) if spec_on else None
 
-            ids, e, spec, front, _ = refine_pass(cs.levels, gather, complete, self.kd_v, tol)  # G-9
+            ids, e, spec, front, _ = refine_pass(cs.levels, gather, complete, self.kd_v, tol, predict)  # G-9
             counts.append(len(ids))
             e_full = complete(ids, e)
             total += e_full
@@ -370,6 +373,7 @@ class CutState:
             from lodprt.precompute.indirect_cut import IndirectLevels
 
             self.levels = IndirectLevels(h, self.referenced)
+            self.level_rows = [plan.rows_for(h.vertex[f]) for f in self.levels.fronts]  # what each level reads
             self.indirect_nodes = self.indirect_anc = self.gather_ids = None
             return
         self.levels = None

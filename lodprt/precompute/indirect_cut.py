@@ -98,14 +98,17 @@ class _Gathered:
         return np.concatenate(self.ids), np.concatenate(self.e), spec
 
 
-def refine_pass(levels: IndirectLevels, gather, complete, kd: np.ndarray, tolerance: float):
+def refine_pass(levels: IndirectLevels, gather, complete, kd: np.ndarray, tolerance: float, predict=None):
     """One pass of G-9.
 
     gather(ids (G,) int32) -> (E (G, C), specular (G, C, n) or None) gathers at ``ids``; complete(ids (G,),
     values (G, ...)) -> (V, ...) is T-15 from those vertices; kd (V, C) the diffuse albedo; tolerance the absolute
-    RMS radiance ``tau L_rms`` of G-9. Returns (gathered ids (G,) int32, E (G, C), specular (G, C, n) or None, the
+    RMS radiance ``tau L_rms`` of G-9; predict(k, ids, values) -> (V, ...), when given, is ``complete`` right at
+    least at the vertices of level ``F_k`` (the only ones level k reads). Returns (gathered ids (G,) int32, E (G, C), specular (G, C, n) or None, the
     pass' front (N,) bool: the nodes under which it stopped, and the estimated squared error it left (G-9)).
     """
+    if predict is None:
+        predict = lambda k, ids, values: complete(ids, values)  # noqa: E731
     h = levels.h
     got = _Gathered(h.num_vertices, levels.referenced, gather)
     got.take(h.vertex[levels.fronts[0]])
@@ -119,7 +122,7 @@ def refine_pass(levels: IndirectLevels, gather, complete, kd: np.ndarray, tolera
         cand = open_[par]  # the nodes of F_k under a region still open
         if not cand.any():
             break
-        field = complete(*got.arrays()[:2]) if k < last else None  # T-15 from the coarser levels
+        field = predict(k, *got.arrays()[:2]) if k < last else None  # T-15 from the coarser levels
         verts = h.vertex[levels.fronts[k][cand]]
         new, e = got.take(verts)
         prev = levels.fronts[k - 1]
