@@ -13,10 +13,10 @@ vertex already has values (``have``), it gets the T-15 blend of its CSR ring,
     T-15  c(p) = sum_j w_j c(q_j) / sum_j w_j,
 
 the sums over the ring neighbours that are not dark (all of them when every neighbour is dark). A ring holds
-vertices of earlier waves only, so every value a row reads is final when it is read. The value type (float32 or float64)
-is the output's; the float32 weights are widened to it, and the sums run in it, in ring order. Every loop runs from
-the CSR starts and ends and from the output's shape; the host checks that rows, ring ids and vertices lie inside
-the arrays they index.
+vertices of earlier waves only, so every value a row reads is final when it is read. The value type (float32 or
+float64) is the output's; the float32 weights are widened to it, and the sums run in it, in ring order. Every loop
+runs from the CSR starts and ends and from the output's shape; the host checks that rows, ring ids and vertices lie
+inside the arrays they index.
 """
 
 from typing import Any
@@ -201,8 +201,7 @@ def ring_weights(
                     chosen = cand
     if chosen == RULE_SHEPARD and open_ring:
         chosen = RULE_BOUNDARY
-    if n > 0:
-        rule[m] = wp.int8(chosen)
+    rule[m] = wp.int8(chosen)  # an empty ring: Shepard, with no weight to write
     if chosen == RULE_BOUNDARY:  # p on the segment between the neighbours either side of the gap
         b = (gap_at + 1) % n
         da = offset_at(positions, ring_ids, lo, n, gap_at, p)

@@ -22,9 +22,10 @@ takes over, in this order:
 
 Weights are normalised to sum 1, so a ring of equal coefficients completes to exactly those. Nothing here is NaN.
 The weights depend on geometry only: ``CompletionPlan`` computes them once per hierarchy (float64 maths, stored as
-float32 in CSR rings with int32 neighbour ids: memory follows the real ring sizes); ``complete`` then fills one
-sample in "waves" (a vertex's wave is one more than the highest wave among its neighbours), vectorised per wave
-in chunks of rows, in float64 or float32.
+float32 in CSR rings with int32 neighbour ids: memory follows the real ring sizes), in a Warp kernel over the cores
+(``lodprt.kernels.completion.ring_weights``; ``ring_weights`` here is its numpy reference, which the tests hold it
+to); ``complete`` then fills one sample in "waves" (a vertex's wave is one more than the highest wave among its
+neighbours), the rows in wave order in one kernel launch (``complete_in_order``), in float64 or float32.
 """
 
 from __future__ import annotations
@@ -35,10 +36,8 @@ from lodprt.devices import warp
 from lodprt.model.hierarchy import Hierarchy
 
 RULE_T15, RULE_MEAN_VALUE, RULE_SHEPARD, RULE_BOUNDARY = 0, 1, 2, 3
-#: rows of rings weighed, waved or completed at once (memory is CHUNK x the chunk's largest ring, or its entries)
+#: rows at once in ``wave_numbers`` and in the chunked bounds of ``lodprt.runtime.node_bounds``
 CHUNK = 8192
-#: padded ring entries weighed at once (a chunk of rows with large rings holds fewer rows)
-RING_ENTRIES = 16 * CHUNK
 RULE_NAMES = ("T-15 cotangent", "mean value", "Shepard", "boundary")
 #: an angular gap in a sorted ring at least this close to 180 degrees (radians) makes it an open boundary ring
 GAP_SLACK = 1e-6
