@@ -86,30 +86,3 @@ def load_kernels(device: str, *modules) -> float:
     for module in modules:
         wp.load_module(module, device=device)
     return time.perf_counter() - t0
-
-
-def launch_ranges(kernel, n: int, device: str, inputs_for, jobs: int | None) -> None:
-    """Launch ``kernel`` over items 0..n-1 in ``jobs`` contiguous ranges from as many Python threads on the CPU (a
-    CPU launch runs on one thread and releases the GIL); ``inputs_for(first)`` gives the inputs of the range that
-    starts at ``first``; ranges write disjoint rows, so the result does not depend on ``jobs``. One launch on CUDA."""
-    import os
-
-    import numpy as np
-
-    wp = warp()
-    jobs = (os.cpu_count() or 1) if jobs is None else max(1, int(jobs))
-    if not device.startswith("cpu") or jobs == 1 or n < 2 * jobs:
-        if n:
-            wp.launch(kernel, dim=n, device=device, inputs=inputs_for(0))
-        return
-    from concurrent.futures import ThreadPoolExecutor
-
-    edges = np.linspace(0, n, jobs + 1).astype(int)
-
-    def run(k):
-        a, b = int(edges[k]), int(edges[k + 1])
-        if b > a:
-            wp.launch(kernel, dim=b - a, device=device, inputs=inputs_for(a))
-
-    with ThreadPoolExecutor(jobs) as pool:
-        list(pool.map(run, range(jobs)))

@@ -172,12 +172,12 @@ def test_quadric_kernels_match_numpy(device):
 def test_threads_build_the_same_hierarchy(monkeypatch):
     """The round kernels sliced over several threads (``KernelThreads``; every pass split, down to tiny ones) build
     the node arrays one thread builds, bit for bit."""
-    import lodprt.model.hierarchy_rounds as rounds
+    import lodprt.launches as launches
 
     pos, faces = wavy_grid(24)
     normals = np.tile([0, 1.0, 0], (len(pos), 1))
     one = build_hierarchy(pos, faces, normals, target_base=8, workers=1)
-    monkeypatch.setattr(rounds, "SPLIT_MIN", 2)
+    monkeypatch.setattr(launches, "SPLIT_MIN", 2)
     for workers in (2, 3):
         many = build_hierarchy(pos, faces, normals, target_base=8, workers=workers)
         for name in ("parent", "children", "vertex", "creation", "cone_axis", "cone_half_angle", "radius",

@@ -216,7 +216,7 @@ class CompletionPlan:
         ``ring_weights`` above, row by row, in float64), sliced over ``threads`` (a ``KernelThreads``; None: every
         core for this call)."""
         from lodprt.kernels import completion as kc
-        from lodprt.model.hierarchy_rounds import KernelThreads, warp_view
+        from lodprt.launches import KernelThreads, warp_view
 
         wp = warp()
         V = self.h.num_vertices
@@ -315,7 +315,7 @@ class CompletionPlan:
         CPU): each from its ring's values, dark neighbours (``dark_v`` (V,) bool) dropped and the rest renormalised
         (all of them when all are dark); only plan ``rows`` (in wave order) when given. ``have`` is updated."""
         from lodprt.kernels import completion as kc
-        from lodprt.model.hierarchy_rounds import warp_view
+        from lodprt.launches import warp_view
 
         wp = warp()
         V = self.h.num_vertices

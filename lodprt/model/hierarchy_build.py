@@ -25,7 +25,8 @@ from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, concat_ranges, leaf_layout
 from lodprt.model.hierarchy_attributes import merge_cones
 from lodprt.model.hierarchy_levels import mesh_groups
-from lodprt.model.hierarchy_rounds import QUADRIC_ENTRIES, CollapseRounds, KernelThreads, one_rings, warp_view
+from lodprt.launches import KernelThreads, warp_view
+from lodprt.model.hierarchy_rounds import QUADRIC_ENTRIES, CollapseRounds, one_rings
 
 log = logging.getLogger(__name__)
 

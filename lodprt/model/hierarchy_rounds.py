@@ -2,10 +2,10 @@
 ``CollapseRounds``.
 
 A round looks at the whole current mesh at once, with the Warp kernels of ``lodprt.kernels.hierarchy`` on the CPU
-(no per-vertex Python loop; the per-vertex and per-collapse passes sliced over the cores, ``KernelThreads``): the
-one-rings and face corners (``one_rings``, ``adjacency``); every movable vertex ``v`` proposes
-its cheapest legal move ``v -> u`` (Garland-Heckbert QEM cost of ``u``'s position under the summed quadrics, plus
-``EDGE_WEIGHT |uv|^4``; legal: link condition, valence, boundary rules, fold-over, slivers: docs/HIERARCHY.md);
+(no per-vertex Python loop; the per-vertex and per-collapse passes sliced over the cores by
+``lodprt.launches.KernelThreads``): the one-rings and face corners (``one_rings``, ``adjacency``); every movable
+vertex ``v`` proposes its cheapest legal move ``v -> u`` (Garland-Heckbert QEM cost of ``u``'s position under the
+summed quadrics, plus ``EDGE_WEIGHT |uv|^4``; legal: link condition, valence, boundary rules, fold-over, slivers: docs/HIERARCHY.md);
 proposals are ranked by cost class (``cost_class``: within a factor ``CLASS_STEP``), then by a hash of the
 position, and taken in that order unless they conflict with a collapse made before them or with a waiting proposal
 of a cheaper class (those wait for the next round: the Luby-style maximal independent set within each cost class,
@@ -17,13 +17,10 @@ vertices whenever half of them have gone, so late rounds cost what the small mes
 
 from __future__ import annotations
 
-import concurrent.futures
-import os
-import threading
-
 import numpy as np
 
 from lodprt.devices import warp
+from lodprt.launches import DEVICE, KernelThreads, warp_view
 
 #: a moved face must keep its normal within this cosine of its old one (0 = 90 degrees)
 FOLD_COS = 0.0
@@ -36,12 +33,6 @@ MAX_VALENCE = 24
 #: moves whose costs lie within one power of CLASS_STEP are ranked by position hash, not by cost (``cost_class``)
 CLASS_STEP = 2.0
 
-#: the Warp device of the round kernels (``lodprt.kernels.hierarchy``): the build is host work, next to numpy
-DEVICE = "cpu"
-#: a pass over fewer items runs as one launch (a launch costs tens of microseconds): ``KernelThreads``
-SPLIT_MIN = 8192
-#: slices of a pass per thread, at most (``KernelThreads.launch``)
-SLICES = 4
 
 #: the removal level of a vertex the seeding decimation never removed (above every phase)
 NEVER = np.iinfo(np.int32).max
@@ -85,14 +76,6 @@ def class_key(cls: np.ndarray) -> np.ndarray:
     return (np.clip(cls, -(2**15) + 1, 2**15 - 1) + 2**15).astype(np.uint16)
 
 
-def warp_view(a: np.ndarray, dtype):
-    """A Warp view of the CPU array ``a`` (bool viewed as uint8; contiguous, no copy when it already is)."""
-    a = np.ascontiguousarray(a)
-    if a.dtype == bool:
-        a = a.view(np.uint8)
-    return warp().array(a, dtype=dtype, device=DEVICE, copy=False)
-
-
 def one_rings(faces: np.ndarray, fcount: np.ndarray, threads: "KernelThreads") -> tuple:
     """The face corners and one-rings of ``faces`` (M, 3) int32 (``fcount`` (n,) the faces at each vertex):
     fstart (n + 1,) int64 and corner (3M,) int32, the flat corner indices around each vertex, ascending (a CSR);
@@ -116,69 +99,6 @@ def one_rings(faces: np.ndarray, fcount: np.ndarray, threads: "KernelThreads") -
     threads.launch(kh.gather_rings, n, [warp_view(faces, wp.int32), wfstart, wcorner, warp_view(dst, wp.int32),
                                         warp_view(count, wp.int32), warp_view(end, wp.int64)], work=fstart)
     return fstart, corner, dst, count, 2 * fstart, end
-
-
-class KernelThreads:
-    """The threads one pass of a per-vertex or per-collapse round kernel is sliced over (a CPU launch releases the
-    GIL, so the slices run at once): this thread and ``workers - 1`` pool threads (``workers`` None: every core
-    this process may use). Each slice is a launch of ``dim`` ``b - a`` with ``first = a`` (the kernel's first
-    argument); the outputs are what one launch gives, since each thread writes only its own items' outputs."""
-
-    def __init__(self, workers: int | None):
-        if workers is None:
-            workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        self.workers = max(1, int(workers))
-        self.pool = concurrent.futures.ThreadPoolExecutor(self.workers - 1) if self.workers > 1 else None
-
-    def __enter__(self) -> "KernelThreads":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def close(self) -> None:
-        if self.pool is not None:
-            self.pool.shutdown()
-            self.pool = None
-
-    def launch(self, kernel, dim: int, inputs: list, work: np.ndarray | None = None) -> None:
-        """``kernel`` over items ``0..dim-1`` (``inputs`` after ``first``) on the CPU, in ``slices``."""
-        wp = warp()
-        self.slices(lambda a, b: wp.launch(kernel, dim=b - a, device=DEVICE, inputs=[a] + inputs), dim, work)
-
-    def slices(self, run, dim: int, work: np.ndarray | None = None, most: int | None = None) -> None:
-        """``run(a, b)`` over slices ``a:b`` of items ``0..dim-1`` of about equal ``work`` (cumulative (dim + 1,),
-        e.g. the corner CSR start; None: equal counts), ``SLICES`` per thread (each thread takes the next slice
-        when it is done with one: a core shared with another process does fewer); one slice below ``SPLIT_MIN``
-        items; with ``most``, no slice of more than ``most`` items (bounded per-slice buffers). ``run`` must write
-        only its own items' outputs (a Warp CPU launch on views of them, say)."""
-        parts = 1
-        if self.pool is not None and dim >= SPLIT_MIN:
-            parts = min(SLICES * self.workers, max(self.workers, dim // SPLIT_MIN))
-        if most is not None:
-            parts = max(parts, -(-dim // max(int(most), 1)))
-        if work is None:
-            cuts = np.linspace(0, dim, parts + 1).astype(np.int64)
-        else:
-            cuts = np.searchsorted(work[: dim + 1], np.linspace(0, work[dim], parts + 1)).astype(np.int64)
-            cuts[0], cuts[-1] = 0, dim
-        todo = iter([(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:]) if b > a])
-        lock = threading.Lock()
-
-        def drain():
-            while True:
-                with lock:
-                    ab = next(todo, None)
-                if ab is None:
-                    return
-                run(*ab)
-
-        futures = [self.pool.submit(drain) for _ in range(self.workers - 1)] if parts > 1 else []
-        try:
-            drain()
-        finally:
-            for f in futures:
-                f.result()
 
 
 class CollapseRounds:

@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.devices import launch_ranges, resolve_device, warp
+from lodprt.devices import resolve_device, warp
+from lodprt.launches import launch_ranges
 from lodprt.deprecation import renamed_arguments
 from lodprt.errors import LodprtError
 from lodprt.precompute.transfer import Geometry, diffuse_transfer, fibonacci_directions

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.devices import launch_ranges, load_kernels, resolve_device, warp
+from lodprt.devices import load_kernels, resolve_device, warp
+from lodprt.launches import launch_ranges
 from lodprt.deprecation import renamed_arguments
 from lodprt.errors import LodprtError
 from lodprt.model import sh

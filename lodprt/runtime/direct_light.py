@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from lodprt.errors import LodprtError
-from lodprt.model.hierarchy_rounds import KernelThreads
+from lodprt.launches import KernelThreads
 
 INTERPOLATIONS = ("direct", "direct-agree", "direct-blend", "thesis")
 DEFAULT_INTERPOLATION = "direct"

@@ -11,7 +11,7 @@ import numpy as np
 from lodprt.devices import warp
 from lodprt.model.completion import CHUNK
 from lodprt.model.hierarchy import node_heights
-from lodprt.model.hierarchy_rounds import KernelThreads, warp_view
+from lodprt.launches import KernelThreads, warp_view
 
 
 def radiance_bound(r: np.ndarray, C: int, n: int) -> np.ndarray:

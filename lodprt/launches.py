@@ -1,0 +1,119 @@
+"""CPU kernel launches sliced over the cores. A Warp launch on the CPU runs on one thread and releases the
+interpreter lock, so slices of one pass launched from several Python threads run at once; each slice writes only
+its own items' outputs, so the result is what one launch gives.
+
+* ``KernelThreads``: this thread and a pool, slices of about equal work taken as threads come free (the hierarchy's
+  collapse rounds, the completion plan's weights, the run time's per-sample bounds and direct light);
+* ``launch_ranges``: one contiguous range per thread, or one launch on CUDA (the transfer, volume and neighbourhood
+  bakes);
+* ``warp_view``: a zero-copy Warp view of a CPU numpy array.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import os
+import threading
+
+import numpy as np
+
+from lodprt.devices import warp
+
+#: the device of ``KernelThreads`` and ``warp_view``: host work, next to numpy
+DEVICE = "cpu"
+#: a pass over fewer items runs as one launch (a launch costs tens of microseconds): ``KernelThreads``
+SPLIT_MIN = 8192
+#: slices of a pass per thread, at most (``KernelThreads.launch``)
+SLICES = 4
+
+
+def warp_view(a: np.ndarray, dtype):
+    """A Warp view of the CPU array ``a`` (bool viewed as uint8; contiguous, no copy when it already is)."""
+    a = np.ascontiguousarray(a)
+    if a.dtype == bool:
+        a = a.view(np.uint8)
+    return warp().array(a, dtype=dtype, device=DEVICE, copy=False)
+
+
+class KernelThreads:
+    """The threads one pass of a per-vertex or per-collapse round kernel is sliced over (a CPU launch releases the
+    GIL, so the slices run at once): this thread and ``workers - 1`` pool threads (``workers`` None: every core
+    this process may use). Each slice is a launch of ``dim`` ``b - a`` with ``first = a`` (the kernel's first
+    argument); the outputs are what one launch gives, since each thread writes only its own items' outputs."""
+
+    def __init__(self, workers: int | None):
+        if workers is None:
+            workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        self.workers = max(1, int(workers))
+        self.pool = concurrent.futures.ThreadPoolExecutor(self.workers - 1) if self.workers > 1 else None
+
+    def __enter__(self) -> "KernelThreads":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+            self.pool = None
+
+    def launch(self, kernel, dim: int, inputs: list, work: np.ndarray | None = None) -> None:
+        """``kernel`` over items ``0..dim-1`` (``inputs`` after ``first``) on the CPU, in ``slices``."""
+        wp = warp()
+        self.slices(lambda a, b: wp.launch(kernel, dim=b - a, device=DEVICE, inputs=[a] + inputs), dim, work)
+
+    def slices(self, run, dim: int, work: np.ndarray | None = None, most: int | None = None) -> None:
+        """``run(a, b)`` over slices ``a:b`` of items ``0..dim-1`` of about equal ``work`` (cumulative (dim + 1,),
+        e.g. the corner CSR start; None: equal counts), ``SLICES`` per thread (each thread takes the next slice
+        when it is done with one: a core shared with another process does fewer); one slice below ``SPLIT_MIN``
+        items; with ``most``, no slice of more than ``most`` items (bounded per-slice buffers). ``run`` must write
+        only its own items' outputs (a Warp CPU launch on views of them, say)."""
+        parts = 1
+        if self.pool is not None and dim >= SPLIT_MIN:
+            parts = min(SLICES * self.workers, max(self.workers, dim // SPLIT_MIN))
+        if most is not None:
+            parts = max(parts, -(-dim // max(int(most), 1)))
+        if work is None:
+            cuts = np.linspace(0, dim, parts + 1).astype(np.int64)
+        else:
+            cuts = np.searchsorted(work[: dim + 1], np.linspace(0, work[dim], parts + 1)).astype(np.int64)
+            cuts[0], cuts[-1] = 0, dim
+        todo = iter([(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:]) if b > a])
+        lock = threading.Lock()
+
+        def drain():
+            while True:
+                with lock:
+                    ab = next(todo, None)
+                if ab is None:
+                    return
+                run(*ab)
+
+        futures = [self.pool.submit(drain) for _ in range(self.workers - 1)] if parts > 1 else []
+        try:
+            drain()
+        finally:
+            for f in futures:
+                f.result()
+
+
+def launch_ranges(kernel, n: int, device: str, inputs_for, jobs: int | None) -> None:
+    """Launch ``kernel`` over items 0..n-1 in ``jobs`` contiguous ranges from as many Python threads on the CPU (a
+    CPU launch runs on one thread and releases the GIL); ``inputs_for(first)`` gives the inputs of the range that
+    starts at ``first``; ranges write disjoint rows, so the result does not depend on ``jobs``. One launch on CUDA."""
+    wp = warp()
+    jobs = (os.cpu_count() or 1) if jobs is None else max(1, int(jobs))
+    if not device.startswith("cpu") or jobs == 1 or n < 2 * jobs:
+        if n:
+            wp.launch(kernel, dim=n, device=device, inputs=inputs_for(0))
+        return
+    edges = np.linspace(0, n, jobs + 1).astype(int)
+
+    def run(k):
+        a, b = int(edges[k]), int(edges[k + 1])
+        if b > a:
+            wp.launch(kernel, dim=b - a, device=device, inputs=inputs_for(a))
+
+    with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
+        list(pool.map(run, range(jobs)))
