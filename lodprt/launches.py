@@ -37,9 +37,10 @@ def warp_view(a: np.ndarray, dtype):
 
 class KernelThreads:
     """The threads one pass of a per-item kernel (a collapse round's, a completion plan's, a sample's bounds) is
-    sliced over (a CPU launch releases the GIL, so the slices run at once): this thread and ``workers - 1`` pool threads (``workers`` None: every core
-    this process may use). Each slice is a launch of ``dim`` ``b - a`` with ``first = a`` (the kernel's first
-    argument); the outputs are what one launch gives, since each thread writes only its own items' outputs."""
+    sliced over (a CPU launch releases the GIL, so the slices run at once): this thread and ``workers - 1`` pool
+    threads (``workers`` None: every core this process may use). Each slice is a launch of ``dim`` ``b - a`` with
+    ``first = a`` (the kernel's first argument); the outputs are what one launch gives, since each thread writes
+    only its own items' outputs."""
 
     def __init__(self, workers: int | None):
         if workers is None:

@@ -163,7 +163,7 @@ def test_complete_matches_the_float64_reference(bunny_store):
 @pytest.mark.parametrize("shape", [(), (1, 1), (3, 1), (1, 16), (3, 9)])
 @pytest.mark.parametrize("with_cut", [False, True])
 def test_wave_kernel_equals_the_dense_reference_on_every_store_kind(bunny_store, shape, dtype, with_cut):
-    """``kernels.completion.complete_wave`` (through ``CompletionPlan.complete``) against the dense float64
+    """``kernels.completion.complete_in_order`` (through ``CompletionPlan.complete``) against the dense float64
     reference: 1 or 3 channels, 1 or n^2 coefficients, float32 or float64, with the sample's cut (dark nodes
     dropped from the rings) and without one; the plan's own inputs are left as they were."""
     s = bunny_store

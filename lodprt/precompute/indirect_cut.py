@@ -104,8 +104,9 @@ def refine_pass(levels: IndirectLevels, gather, complete, kd: np.ndarray, tolera
     gather(ids (G,) int32) -> (E (G, C), specular (G, C, n) or None) gathers at ``ids``; complete(ids (G,),
     values (G, ...)) -> (V, ...) is T-15 from those vertices; kd (V, C) the diffuse albedo; tolerance the absolute
     RMS radiance ``tau L_rms`` of G-9; predict(k, ids, values) -> (V, ...), when given, is ``complete`` right at
-    least at the vertices of level ``F_k`` (the only ones level k reads). Returns (gathered ids (G,) int32, E (G, C), specular (G, C, n) or None, the
-    pass' front (N,) bool: the nodes under which it stopped, and the estimated squared error it left (G-9)).
+    least at the vertices of level ``F_k`` (the only ones level k reads). Returns (gathered ids (G,) int32, E (G, C),
+    specular (G, C, n) or None, the pass' front (N,) bool: the nodes under which it stopped, and the estimated
+    squared error it left (G-9)).
     """
     if predict is None:
         predict = lambda k, ids, values: complete(ids, values)  # noqa: E731
