@@ -190,7 +190,7 @@ class CompletionPlan:
     at the same places: memory follows the real ring sizes (CSR), not the largest ring.
     """
 
-    def __init__(self, h: Hierarchy, positions: np.ndarray, normals: np.ndarray, threads=None):
+    def __init__(self, h: Hierarchy, positions: np.ndarray, normals: np.ndarray):
         self.h = h
         V = h.num_vertices
         internal = np.arange(V, h.num_nodes)
@@ -200,21 +200,19 @@ class CompletionPlan:
         M = len(internal)
         self.ring_len = counts.astype(np.int32)  # real neighbours per row
         self.ring_ptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
-        self.ring_ids = np.empty(int(self.ring_ptr[-1]), np.int32)
+        self.ring_ids = h.neighbours[offs[V] : offs[h.num_nodes]].astype(np.int32)  # each ring, sorted by ``weigh``
         self.ring_w = np.empty(len(self.ring_ids), np.float32)
         self.rule = np.zeros(M, np.int8)
-        self.ring_ids[:] = h.neighbours[offs[V] : offs[h.num_nodes]]  # each row's ring, sorted by the kernel
         if M:
-            self.weigh(positions, normals, threads)
+            self.weigh(positions, normals)
         # waves: neighbours of a collapsed vertex were removed later (or never); coarse first
         self.wave = wave_numbers(self.vertex, self.ring_ptr, self.ring_ids, V)
         self.by_wave = np.argsort(self.wave, kind="stable").astype(np.int32)
         self.wave_ptr = np.searchsorted(self.wave[self.by_wave], np.arange(self.wave.max() + 2 if M else 1))
 
-    def weigh(self, positions: np.ndarray, normals: np.ndarray, threads=None) -> None:
+    def weigh(self, positions: np.ndarray, normals: np.ndarray) -> None:
         """Sort every ring by angle and give it its weights and rule (``lodprt.kernels.completion.ring_weights``:
-        ``ring_weights`` above, row by row, in float64), sliced over ``threads`` (a ``KernelThreads``; None: every
-        core for this call)."""
+        ``ring_weights`` above, row by row, in float64), sliced over every core."""
         from lodprt.kernels import completion as kc
         from lodprt.launches import KernelThreads, warp_view
 
@@ -228,13 +226,8 @@ class CompletionPlan:
         inputs = [warp_view(self.vertex, wp.int32), warp_view(self.ring_ptr, wp.int64), warp_view(p, vec),
                   warp_view(n, vec), warp_view(self.ring_ids, wp.int32), warp_view(self.ring_w, wp.float32),
                   warp_view(self.rule, wp.int8)]
-        own = threads is None
-        threads = KernelThreads(None) if own else threads
-        try:
+        with KernelThreads(None) as threads:
             threads.launch(kc.ring_weights, len(self.vertex), inputs, work=self.ring_ptr)
-        finally:
-            if own:
-                threads.close()
 
     @property
     def nbytes(self) -> int:
