@@ -231,9 +231,6 @@ def bake(
         # plan: kernels, the scene and the hierarchy (each skipped when a resumed store has it complete)
         load_seconds = 0.0 if cluster else load_kernels(device, *bake_kernels())
         t0 = time.perf_counter()
-        if target is not None and not target.complete("scene"):
-            _write_scene(target.writer, scene, sh_order)
-            target.mark("scene")
         hierarchy_seconds, built = None, 0.0
         if hierarchy:
             stored = target is not None and target.complete("hierarchy")  # read back: its build time is not ours
@@ -241,18 +238,23 @@ def bake(
             built = 0.0 if stored else hierarchy_seconds
         job = SampleJob(scene, tree if threshold_deg is not None else None, sh_order, device, threshold_deg,
                         None if target is None else str(target.partial.resolve()), gi)
+        # the device state (BVH, light cut, completion plan) is made on a second thread while the scene and the
+        # hierarchy are written: neither reads what the other makes
+        with concurrent.futures.ThreadPoolExecutor(1) as helper:
+            state = None if cluster else helper.submit(job.device_state)
+            if target is not None:
+                _write_plan(target, scene, sh_order, tree if hierarchy else None, hierarchy_seconds)
+            baker, lightcut = (None, None) if state is None else state.result()
         # launch: the light samples still to bake, each written as it finishes
         total = len(job.lights)
         todo = list(range(total)) if target is None else target.todo()
         step = None if progress is None else (lambda done, _n: progress(total - len(todo) + done, total))
-        baker = None
         if cluster:
             from lodprt.precompute.distributed import run_on_cluster
 
             infos, load_seconds = run_on_cluster(job, todo, workers=workers, scheduler=scheduler, threads=jobs,
                                                  progress=step, vertex_range=vertex_range)
         else:
-            baker, lightcut = job.device_state()
             infos = _run_samples(job, baker, lightcut, todo, jobs, step)
         samples = [infos[k] if k in infos else target.recorded(k) for k in range(total)]
         # bake_seconds counts the light samples and the store; the hierarchy reports its own time
@@ -356,8 +358,7 @@ def check_sh_order(sh_order: int) -> None:
 
 def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[object, float]:
     """The vertex hierarchy (the complete one of a resumed or extended store, ``tree``, or built now with
-    ``method``) and its build seconds; stored under ``hierarchy/`` (completion mark last), with the method that
-    built it."""
+    ``method``) and its build seconds (``_write_plan`` stores it)."""
     from lodprt.model.hierarchy_build import build_hierarchy
 
     if target is not None and target.complete("hierarchy"):
@@ -365,15 +366,22 @@ def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[objec
     t_h = time.perf_counter()
     if tree is None:
         tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=progress, method=method)
-    seconds = time.perf_counter() - t_h
-    if target is not None:
+    return tree, time.perf_counter() - t_h
+
+
+def _write_plan(target, scene: Scene, sh_order: int, tree, seconds) -> None:
+    """The scene, then the hierarchy ``tree`` (None: a bake without one) under ``hierarchy/`` with the method that
+    built it, each with its completion mark last; what a resumed store has complete already is not rewritten."""
+    if not target.complete("scene"):
+        _write_scene(target.writer, scene, sh_order)
+        target.mark("scene")
+    if tree is not None and not target.complete("hierarchy"):
         writer = target.writer
         for name, arr in tree.to_arrays().items():
             writer.array(f"hierarchy/{name}", arr, chunk_rows=1 << 18)
         writer.attrs("hierarchy", levels=tree.levels, seconds=seconds, roots=int(len(tree.roots)), depth=tree.depth,
                      method=tree.method)
         target.mark("hierarchy")
-    return tree, seconds
 
 
 def _run_samples(job: SampleJob, baker: Baker, lightcut, todo: list[int], jobs: int | None, progress) -> dict:

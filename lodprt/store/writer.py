@@ -350,7 +350,7 @@ class StoreWriter:
     def attrs(self, name: str | None = None, **values) -> None:
         with disk_space(self.destination, f"the attributes of '{name or '/'}'"):
             target = self.root if name is None else self.root.require_group(name)
-            target.attrs.update(values)
+            target.update_attributes(values)  # one write of the group's metadata, not one per key
 
     @property
     def destination(self) -> Path:
