@@ -1,7 +1,7 @@
 """Interreflection in the point-light bake: LOD GI bake against the full-resolution GI bake, and against Mitsuba 3.
 
     python benchmarks/gi.py [--quick] [--mitsuba] [--json PATH] [--device cpu|cuda]
-    python benchmarks/gi.py --floors [--quick] [--tolerances 0.01 0.02 1]
+    python benchmarks/gi.py --floors [--quick] [--repeats 3] [--tolerances 0.01 0.02 1]
 
 Scene: the Stanford bunny on a floor, both diffuse white (kd 0.8, ks 0). For each bounce count 0..3 and
 gathering ray count, in the same run: the full-resolution GI bake and the LOD GI bake (light cut --threshold-deg
@@ -15,7 +15,10 @@ radiance inside the direct shadows. Writes benchmarks/results/gi[-quick].json, .
 lights; per floor, in the same run, the full-resolution GI bake, the LOD bake with the geometric indirect cut (G-5,
 --indirect-threshold-deg) and with the error-driven one (G-9) at each of ``--tolerances``: bake time, its ratio to
 the full bake's, gathering vertices per pass and the rel-RMSE of the completed radiance against the full bake (all
-vertices, the bunny's, the floor's). Writes benchmarks/results/gi-floors[-quick].json.
+vertices, the bunny's, the floor's). The full bake and every cut run ``--repeats`` rounds, interleaved (this
+machine's speed drifts by 10-20 % between minutes): times are medians, the ratio is the median of the rounds' ratios
+with its least and largest beside it; the bakes are seeded, so every round's values must agree (checked).
+Writes benchmarks/results/gi-floors[-quick].json.
 """
 
 from __future__ import annotations
@@ -99,8 +102,15 @@ def sweep(scene, tree, args, tmp: Path) -> list[dict]:
     return rows
 
 
+def same_values(a: dict, b: dict) -> bool:
+    """Whether two rounds of one cut gathered at the same vertices and agree in every error (to 1e-6)."""
+    return a["gathered"] == b["gathered"] and all(abs(a[k] - b[k]) <= 1e-6 * abs(a[k]) for k in a if k != "gathered")
+
+
 def floor_sweep(args) -> list[dict]:
-    """Full vs LOD GI bakes (G-5 and G-9) on growing floors, 2 bounces, default rays (module docstring)."""
+    """Full vs LOD GI bakes (G-5 and G-9) on growing floors, 2 bounces, default rays (module docstring): per floor,
+    ``args.repeats`` rounds of the full bake then every cut, interleaved so that a slow spell of the machine falls on
+    both; times are medians, the ratio the median of each round's ratio (its range beside it)."""
     import zarr
 
     from lodprt.model.hierarchy_build import build_hierarchy
@@ -112,29 +122,39 @@ def floor_sweep(args) -> list[dict]:
         tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
         bunny = scene.object_id[scene.referenced] == 0
         tmp = Path(tempfile.mkdtemp(prefix="lodprt-gi-floor-"))
+        cuts = [("G-5", {"indirect_threshold_deg": args.indirect_threshold_deg}, args.indirect_threshold_deg)]
+        cuts += [("G-9", {"indirect_tolerance": t}, t) for t in args.tolerances]
+        full_s, lod_s, found = [], [[] for _ in cuts], [None] * len(cuts)
         try:
             common = dict(sh_order=2, device=args.device, tree=tree, bounces=2, overwrite=True)
-            full = bake(scene, tmp / "full.zarr", threshold_deg=None, **common)
-            cf = completed(tmp / "full.zarr", scene.referenced)
-            cuts = [("G-5", {"indirect_threshold_deg": args.indirect_threshold_deg}, args.indirect_threshold_deg)]
-            cuts += [("G-9", {"indirect_tolerance": t}, t) for t in args.tolerances]
-            for cut, kw, value in cuts:
-                lod = bake(scene, tmp / "lod.zarr", threshold_deg=args.threshold_deg, **common, **kw)
-                cl = completed(tmp / "lod.zarr", scene.referenced)
-                norm = float(np.mean(cf**2))
-                part = lambda m: float(np.sqrt(np.mean((cl[:, m] - cf[:, m]) ** 2) * m.mean() / norm))  # noqa: E731
-                rows.append({"floor": floor, "vertices": int(scene.referenced.sum()), "cut": cut, "setting": value,
-                             "full_s": full.bake_seconds, "lod_s": lod.bake_seconds,
-                             "ratio": lod.bake_seconds / full.bake_seconds,
-                             "gathered": zarr.open_group(str(tmp / "lod.zarr"), mode="r").attrs.get(
-                                 "indirect_gather_vertices"),
-                             "lod_vs_full": rel_rmse(cl, cf), "bunny_part": part(bunny), "floor_part": part(~bunny)})
-                r = rows[-1]
-                print(f"  floor {floor} ({r['vertices']:,} vertices) {cut} {value}: full {r['full_s']:.2f} s, LOD "
-                      f"{r['lod_s']:.2f} s ({r['ratio']:.3f}), {r['gathered']:,} gathered, LOD vs full "
-                      f"{r['lod_vs_full']:.4f} (bunny {r['bunny_part']:.4f}, floor {r['floor_part']:.4f})", flush=True)
+            for rep in range(args.repeats):
+                full_s.append(bake(scene, tmp / "full.zarr", threshold_deg=None, **common).bake_seconds)
+                cf = completed(tmp / "full.zarr", scene.referenced)
+                for i, (cut, kw, value) in enumerate(cuts):
+                    lod = bake(scene, tmp / "lod.zarr", threshold_deg=args.threshold_deg, **common, **kw)
+                    lod_s[i].append(lod.bake_seconds)
+                    cl = completed(tmp / "lod.zarr", scene.referenced)
+                    norm = float(np.mean(cf**2))
+                    part = lambda m: float(np.sqrt(np.mean((cl[:, m] - cf[:, m]) ** 2) * m.mean() / norm))  # noqa: E731
+                    errors = {"gathered": zarr.open_group(str(tmp / "lod.zarr"), mode="r").attrs.get(
+                                  "indirect_gather_vertices"),
+                              "lod_vs_full": rel_rmse(cl, cf), "bunny_part": part(bunny), "floor_part": part(~bunny)}
+                    if found[i] is not None and not same_values(found[i], errors):  # seeded: every round the same
+                        raise SystemExit(f"floor {floor} {cut} {value}: round {rep} baked other values: {errors} "
+                                         f"against {found[i]}")
+                    found[i] = errors
+                    print(f"  floor {floor} round {rep} {cut} {value}: full {full_s[-1]:.2f} s, LOD "
+                          f"{lod.bake_seconds:.2f} s ({lod.bake_seconds / full_s[-1]:.3f}), {errors['gathered']:,} "
+                          f"gathered, LOD vs full {errors['lod_vs_full']:.4f} (bunny {errors['bunny_part']:.4f}, "
+                          f"floor {errors['floor_part']:.4f})", flush=True)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
+        for i, (cut, _kw, value) in enumerate(cuts):
+            ratios = np.array(lod_s[i]) / np.array(full_s)
+            rows.append({"floor": floor, "vertices": int(scene.referenced.sum()), "cut": cut, "setting": value,
+                         "full_s": float(np.median(full_s)), "lod_s": float(np.median(lod_s[i])),
+                         "ratio": float(np.median(ratios)), "ratio_min": float(ratios.min()),
+                         "ratio_max": float(ratios.max()), "rounds": args.repeats, **found[i]})
     return rows
 
 
@@ -143,14 +163,16 @@ def floors_main(args) -> None:
     rows = floor_sweep(args)
     print(table(rows, [("floor", "floor", "d"), ("vertices", "vertices", ",d"), ("cut", "cut", "s"),
                        ("setting", "setting", "g"), ("full_s", "full s", ".2f"), ("lod_s", "LOD s", ".2f"),
-                       ("ratio", "LOD/full", ".3f"), ("gathered", "gathered", ",d"),
+                       ("ratio", "LOD/full", ".3f"), ("ratio_min", "min", ".3f"), ("ratio_max", "max", ".3f"),
+                       ("gathered", "gathered", ",d"),
                        ("lod_vs_full", "LOD vs full", ".4f"), ("bunny_part", "bunny", ".4f"),
                        ("floor_part", "floor", ".4f")]))
     name = "gi-floors" + ("-quick" if args.quick else "")
     results = {"benchmark": "gi", "quick": args.quick, "environment": environment(args.device),
                "settings": {"bounces": 2, "gi_rays": 64, "threshold_deg": args.threshold_deg,
                             "indirect_threshold_deg": args.indirect_threshold_deg, "tolerances": args.tolerances,
-                            "lights": "1 x 1 x 1" if args.quick else "2 x 1 x 2", "kd": KD},
+                            "lights": "1 x 1 x 1" if args.quick else "2 x 1 x 2", "kd": KD,
+                            "rounds": args.repeats},
                "rows": rows}
     print("wrote", write(name, results, args.json))
 
@@ -270,6 +292,8 @@ def main():
     p.add_argument("--indirect-threshold-deg", type=float, default=20.0, help="indirect cut (default 20)")
     p.add_argument("--floors", action="store_true", help="only the floor sweep: full vs LOD (G-5 and G-9) on floors "
                    "of 60, 200 and 400, 2 bounces, default rays (gi-floors.json)")
+    p.add_argument("--repeats", type=int, default=3, help="floor sweep: rounds of the full bake and every cut, "
+                   "interleaved; medians reported (default 3)")
     p.add_argument("--tolerances", type=float, nargs="+", default=[0.01, 0.015, 0.02, 1.0],
                    help="G-9 tolerances of the floor sweep (default 0.01 0.015 0.02 1; 1 is the coarsest cut: the "
                    "cost of everything but the gathering)")

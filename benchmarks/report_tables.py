@@ -246,9 +246,10 @@ def gi(r: dict) -> str:
 
 def gi_floors(r: dict) -> str:
     rows = [[n(row["floor"]), n(row["vertices"]), row["cut"], g(row["setting"]), g(row["full_s"]), g(row["lod_s"]),
-             g(row["ratio"]), n(row["gathered"]), e4(row["lod_vs_full"]), e4(row["bunny_part"]), e4(row["floor_part"])]
+             g(row["ratio"]) + (f" ({g(row['ratio_min'])}-{g(row['ratio_max'])})" if "ratio_min" in row else ""),
+             n(row["gathered"]), e4(row["lod_vs_full"]), e4(row["bunny_part"]), e4(row["floor_part"])]
             for row in r["rows"]]
-    return md(["floor", "vertices", "cut", "setting", "full s", "LOD s", "LOD / full", "gathered per pass",
+    return md(["floor", "vertices", "cut", "setting", "full s", "LOD s", "LOD / full (range)", "gathered per pass",
                "LOD vs full", "bunny part", "floor part"], rows)
 
 
