@@ -239,18 +239,6 @@ class CompletionPlan:
         lo, hi = self.ring_ptr[m], self.ring_ptr[m + 1]
         return self.ring_ids[lo:hi], self.ring_w[lo:hi]
 
-    def interpolate(self, c: np.ndarray, rows) -> np.ndarray:
-        """T-15 ``sum_j w_j c[q_j]`` over the rings of plan ``rows`` (a slice or ids) for per-vertex values ``c``
-        (V, K): (len(rows), K) in ``c``'s precision, at least float32; 0 for an empty ring."""
-        rows = as_rows(rows, len(self.vertex))
-        flat, filled, seg = ring_rows(self.ring_ptr, rows)
-        dt = np.result_type(c.dtype, np.float32)
-        out = np.zeros((len(rows), c.shape[1]), dt)
-        if len(flat):
-            terms = self.ring_w[flat, None].astype(dt) * c[self.ring_ids[flat]]
-            out[filled] = np.add.reduceat(terms, seg, axis=0)
-        return out
-
     def rule_fractions(self) -> dict[str, float]:
         counts = np.bincount(self.rule, minlength=len(RULE_NAMES)) / max(len(self.rule), 1)
         return {name: float(c) for name, c in zip(RULE_NAMES, counts)}
