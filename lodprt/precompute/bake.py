@@ -238,13 +238,7 @@ def bake(
             built = 0.0 if stored else hierarchy_seconds
         job = SampleJob(scene, tree if threshold_deg is not None else None, sh_order, device, threshold_deg,
                         None if target is None else str(target.partial.resolve()), gi)
-        # the device state (BVH, light cut, completion plan) is made on a second thread while the scene and the
-        # hierarchy are written: neither reads what the other makes
-        with concurrent.futures.ThreadPoolExecutor(1) as helper:
-            state = None if cluster else helper.submit(job.device_state)
-            if target is not None:
-                _write_plan(target, scene, sh_order, tree if hierarchy else None, hierarchy_seconds)
-            baker, lightcut = (None, None) if state is None else state.result()
+        baker, lightcut = _store_plan(job, target, tree if hierarchy else None, hierarchy_seconds, cluster)
         # launch: the light samples still to bake, each written as it finishes
         total = len(job.lights)
         todo = list(range(total)) if target is None else target.todo()
@@ -367,6 +361,17 @@ def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[objec
     if tree is None:
         tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=progress, method=method)
     return tree, time.perf_counter() - t_h
+
+
+def _store_plan(job: SampleJob, target, tree, seconds, cluster: bool) -> tuple:
+    """Write the scene and the hierarchy ``tree`` (``_write_plan``) while the device state is made on a second
+    thread (neither reads what the other makes; none for a cluster, whose workers make their own): (Baker,
+    LightCut or None), or (None, None) for a cluster."""
+    with concurrent.futures.ThreadPoolExecutor(1) as helper:
+        state = None if cluster else helper.submit(job.device_state)
+        if target is not None:
+            _write_plan(target, job.scene, job.sh_order, tree, seconds)
+        return (None, None) if state is None else state.result()
 
 
 def _write_plan(target, scene: Scene, sh_order: int, tree, seconds) -> None:

@@ -17,7 +17,6 @@ frame. The equations and the measured behaviour are in docs/RUNTIME.md and docs/
 
 from __future__ import annotations
 
-import concurrent.futures
 import logging
 import math
 import os
@@ -27,6 +26,7 @@ import typing
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.launches import KernelThreads
 from lodprt.runtime import node_bounds
 from lodprt.runtime import frame_error
 from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
@@ -255,8 +255,7 @@ class Runtime:
 
         wp = warp()
         dev = self.device
-        self._threads = max(1, min(os.cpu_count() or 1, 8))
-        self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=self._threads) if self._threads > 1 else None
+        self._threads = KernelThreads(min(os.cpu_count() or 1, 8)) if dev == "cpu" else None
         # on the CPU the Warp arrays wrap the float32 numpy arrays (no second copy)
         v3 = lambda a: wp.array(a, dtype=wp.vec3, device=dev, copy=dev != "cpu")  # noqa: E731
         f1 = lambda a: wp.array(a, dtype=wp.float32, device=dev, copy=dev != "cpu")  # noqa: E731
@@ -270,18 +269,18 @@ class Runtime:
         }
 
     def _launch(self, kernel, rows: int, inputs: list, outputs: list) -> None:
-        """Launch ``kernel`` over ``rows`` rows; on the CPU, split into one launch per core on threads (Warp runs a
-        CPU launch on one thread and releases the GIL), each launch taking its first row as ``offset``."""
-        wp = self._wp
-        parts = self._threads if self.device == "cpu" and rows >= 2048 else 1
-        if parts == 1:
-            wp.launch(kernel, dim=rows, inputs=[0] + inputs, outputs=outputs, device=self.device)
-            return
-        cuts = np.linspace(0, rows, parts + 1).astype(int)
-        futures = [self._pool.submit(wp.launch, kernel, dim=int(b - a), inputs=[int(a)] + inputs, outputs=outputs,
-                                     device=self.device) for a, b in zip(cuts[:-1], cuts[1:])]
-        for f in futures:
-            f.result()
+        """Launch ``kernel`` over ``rows`` rows, each launch taking its first row as ``offset``: on the CPU in slices
+        over the cores (``lodprt.launches.KernelThreads``: Warp runs a CPU launch on one thread and releases the
+        GIL), one launch on a GPU."""
+        wp, dev = self._wp, self.device
+
+        def run(a: int, b: int) -> None:
+            wp.launch(kernel, dim=b - a, inputs=[a] + inputs, outputs=outputs, device=dev)
+
+        if self._threads is None:
+            run(0, rows)
+        else:
+            self._threads.slices(run, rows)
 
     def _frame_inputs(self) -> tuple:
         """The slots of the samples in use and every slot's RGB weight (0 for the others), on the device."""
