@@ -14,10 +14,8 @@ where the gathered irradiance departs from its T-15 prediction, within a stated 
 
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
 import math
-import os
 import threading
 
 import numpy as np
@@ -25,6 +23,7 @@ import numpy as np
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.kernels.visibility import BACK_FACING, LIT
+from lodprt.launches import launch_ranges
 from lodprt.model import sh
 from lodprt.model.hierarchy import active_ancestors, node_heights
 
@@ -394,17 +393,9 @@ class CutState:
                         device=b.device)
         n = len(b.ids_host)
         out = wp.zeros(n, dtype=wp.float32, device=b.device)
-
-        def launch(lo: int, hi: int) -> None:  # a CPU launch runs on one thread and releases the GIL
-            if hi > lo:
-                wp.launch(kgi.hit_distance, dim=hi - lo, device=b.device,
-                          inputs=[b.mesh.id, b.points, b.normals, b.ids[lo:hi], dirs, int(gi.settings.seed),
-                                  float(b.offset), gi.max_dist], outputs=[out[lo:hi]])
-
-        parts = (os.cpu_count() or 1) if b.device == "cpu" else 1
-        edges = np.linspace(0, n, parts + 1).astype(int)
-        with concurrent.futures.ThreadPoolExecutor(parts) as pool:
-            list(pool.map(launch, edges[:-1], edges[1:]))
+        launch_ranges(kgi.hit_distance, n, b.device, lambda first: [  # a range per core on the CPU
+            b.mesh.id, b.points, b.normals, b.ids[first:], dirs, int(gi.settings.seed), float(b.offset), gi.max_dist,
+            out[first:]], None)
         inv = np.zeros(self.h.num_vertices)
         inv[b.ids_host] = out.numpy()
         return inv
