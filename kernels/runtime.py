@@ -295,13 +295,18 @@ def first_hits(
     columns: int,  # In: grid columns (rows = face.shape[0] / columns)
     face: wp.array(dtype=wp.int32),  # Out: (rows * columns,) the first face the ray through each cell's centre
     #                                       meets, -1 where it meets none
+    bary: wp.array(dtype=wp.vec3),  # Out: (rows * columns,) the hit's barycentric weights of the face's three
+    #                                      corners, in index order (0 where the ray meets none)
 ):
-    """E-2 (docs/RUNTIME.md): one primary ray from the eye through the centre of each cell of a screen grid."""
+    """E-1, E-2 (docs/RUNTIME.md): one primary ray from the eye through the centre of each cell of a screen grid,
+    the first face it meets and where on it."""
     k = wp.tid()
     i = k % columns
     j = k / columns
     d = corner + (float(i) + 0.5) * du + (float(j) + 0.5) * dv
     face[k] = -1
+    bary[k] = wp.vec3(0.0, 0.0, 0.0)
     q = wp.mesh_query_ray(mesh, eye, wp.normalize(d), 1.0e30)
     if q.result:
         face[k] = q.face
+        bary[k] = wp.vec3(q.u, q.v, 1.0 - q.u - q.v)  # Warp's hit point: u p0 + v p1 + (1 - u - v) p2

@@ -10,8 +10,9 @@ import pytest
 from lodprt.errors import LodprtError
 
 
-def moller_trumbore(eye: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """float64: the nearest triangle each ray (eye + t dirs, t > 0) meets, -1 where none."""
+def moller_trumbore(eye: np.ndarray, dirs: np.ndarray, tri: np.ndarray, with_t: bool = False):
+    """float64: the nearest triangle each ray (eye + t dirs, t > 0) meets, -1 where none (and its t, inf where
+    none, with ``with_t``)."""
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
     e1, e2 = b - a, c - a
     best = np.full(len(dirs), np.inf)
@@ -28,13 +29,14 @@ def moller_trumbore(eye: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.nd
         t = (q @ e2[k]) * inv
         hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9) & (t < best)
         best[hit], out[hit] = t[hit], k
-    return out
+    return (out, best) if with_t else out
 
 
 @pytest.mark.warp_debug
 def test_first_hits_agree_with_a_second_ray_caster(device):
     """Three overlapping quads at different depths, one tilted: the face each grid ray meets first equals the
-    float64 caster's, on every device (rays within 1e-4 of an edge are not compared)."""
+    float64 caster's, on every device (rays within 1e-4 of an edge are not compared), and its barycentric weights
+    put the hit where the caster's ray parameter does (E-1 interpolates the corners' radiance with them)."""
     import warp as wp
 
     from lodprt.kernels import runtime as kr
@@ -55,18 +57,25 @@ def test_first_hits_agree_with_a_second_ray_caster(device):
     mesh = wp.Mesh(points=wp.array(pts.astype(np.float32), dtype=wp.vec3, device=device),
                    indices=wp.array(faces.astype(np.int32).ravel(), dtype=wp.int32, device=device))
     face = wp.zeros(cols * rows, dtype=wp.int32, device=device)
+    bary = wp.zeros(cols * rows, dtype=wp.vec3, device=device)
     vec = lambda a: wp.vec3(*map(float, a))  # noqa: E731
     wp.launch(kr.first_hits, dim=cols * rows, inputs=[mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
-              outputs=[face], device=device)
+              outputs=[face, bary], device=device)
     i, j = np.meshgrid(np.arange(cols), np.arange(rows))
     dirs = corner + (i.ravel()[:, None] + 0.5) * du + (j.ravel()[:, None] + 0.5) * dv
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    ref = moller_trumbore(eye, dirs, pts[faces])
-    got = face.numpy()
+    ref, t = moller_trumbore(eye, dirs, pts[faces], with_t=True)
+    got, w = face.numpy(), bary.numpy().astype(np.float64)
     assert (ref >= 0).sum() > 0.3 * len(ref) and (ref < 0).any() and len(set(ref[ref >= 0])) >= 4
     # a ray near a shared edge may be given to either face: compare the quads there, the faces elsewhere
     assert np.array_equal(np.where(got >= 0, got // 2, -1), np.where(ref >= 0, ref // 2, -1))
     assert (got == ref).mean() > 0.95
+    hit = got >= 0
+    assert np.all(w[~hit] == 0)
+    np.testing.assert_allclose(w[hit].sum(1), 1.0, atol=1e-5)
+    assert (w[hit] >= -1e-5).all() and (w[hit] > 0.05).all(1).any()  # inside the face, and not only its corners
+    at = (w[hit][:, :, None] * pts[faces[got[hit]]]).sum(1)  # the weights' point on the face the kernel met
+    np.testing.assert_allclose(at, eye + t[hit, None] * dirs[hit], atol=1e-4)
 
 
 @pytest.mark.usefixtures("gl")
@@ -86,7 +95,7 @@ def test_screen_hits_cover_what_the_renderer_covers(bunny_bake):
     for k, scale in enumerate((1.0, 0.3)):
         rt.set_camera(Camera(eye=tuple(c + (e - c) * scale), target=tuple(c + [0.3 * k, 0, 0]), width=320,
                              height=240))
-        face, cell = screen_hits(rt)
+        face, _, cell = screen_hits(rt)
         frame = rt.update()
         frame.radiance[:] = 1.0  # every pixel the mesh covers lit, whether drawn per vertex or per pixel (SH)
         frame.coefficients[:] = 0.0
@@ -180,3 +189,39 @@ def test_cli_target_off_and_budget(bunny_bake):
     assert rt.steering is None and rt.triangle_budget == 4000
     with pytest.raises(LodprtError, match="triangle_budget"):
         Runtime(open_store(bunny_bake), device="cpu", triangle_budget=4000, target_psnr=30)
+
+
+@pytest.mark.warp_debug
+def test_relit_any_vertex_is_what_the_full_mesh_frame_draws(bunny_bake):
+    """E-1 relights any vertex (``Runtime.relit``): at the cut's vertices it is the frame's own coefficients and
+    radiance, at every vertex the full-mesh frame's (LOD off, same camera and lights), and the frame's relighting
+    state (M-6's lit lights) is left as it was."""
+    from lodprt.runtime.camera import Camera, default_eye, scene_centre
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(bunny_bake)
+    cam = Camera(eye=default_eye(store), target=scene_centre(store), width=160, height=120)
+    light = store.light_positions[[0, 1, 3, 4]].mean(0)[None]  # between samples: the direct path (M-1)
+    full = Runtime(store, device="cpu", lod=False)
+    full.set_lights(light)
+    full.set_camera(cam)
+    ref = np.zeros((store.num_vertices, 3), np.float32)
+    f = full.update()
+    ref[f.vertex_ids] = f.radiance
+    ref_c = np.zeros((store.num_vertices,) + f.coefficients.shape[1:], np.float32)
+    ref_c[f.vertex_ids] = f.coefficients
+    rt = Runtime(store, device="cpu", error_bound=0.8)
+    rt.set_lights(light)
+    rt.set_camera(cam)
+    frame = rt.update(max_passes=10_000)
+    assert len(frame.vertex_ids) < 0.7 * len(f.vertex_ids)  # a coarse cut: most vertices are not drawn
+    lit = rt.lighting.frame_lit.copy()
+    coef, rad = rt.relit(frame.vertex_ids)
+    np.testing.assert_allclose(rad, frame.radiance, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(coef, frame.coefficients, rtol=0, atol=1e-6)
+    other = np.setdiff1d(f.vertex_ids, frame.vertex_ids)
+    coef, rad = rt.relit(other)
+    np.testing.assert_allclose(rad, ref[other], rtol=0, atol=1e-5 * float(np.abs(ref).max()))
+    np.testing.assert_allclose(coef, ref_c[other], rtol=0, atol=1e-5 * float(np.abs(ref_c).max()))
+    assert np.array_equal(rt.lighting.frame_lit, lit)

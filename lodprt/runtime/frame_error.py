@@ -1,33 +1,40 @@
-"""The view cut's error for the whole frame (docs/RUNTIME.md "An error target for the frame"; E-1..E-4): an
-estimate of the frame's mean squared error against the full mesh from the per-node S-2 bounds, and the steering of
-the per-node bound toward a stated PSNR.
+"""The view cut's error for the whole frame (docs/RUNTIME.md "An error target for the frame"; E-1..E-4): the
+frame's mean squared error against the full mesh, sampled on a grid of primary rays, and the steering of the
+per-node bound toward a stated PSNR.
 
-    E-1   SSE = sum over the cut's coarse nodes in view of m min(pi r_px^2, W H), m the mean over the node's leaves
-          of the squared T-15 residual of its subtree's collapses (units of white squared; the samples' values
-          combined as S-2's bounds are, M-5)
-    E-2   N   = the pixels the cut's front-facing triangles cover (projected areas, at most W H)
-    E-3   PSNR_est = -10 log10(SSE / N)                         (display units of white, as ``frame_error``)
+    E-1   MSE = the mean over the covered rays of the squared difference, clipped at white and averaged over RGB,
+          between the full mesh and the cut's mesh where one primary ray per screen cell meets each
+          (``sampled_error``): the face met, its corners relit under the current lights (T-7, M-1), their
+          coefficients interpolated at the hit and evaluated toward the eye, as the renderer draws a fragment
+    E-2   the rays: one per square cell of about COVERAGE_RAYS cells (``screen_hits``, ``kernels.runtime.
+          first_hits`` on the full mesh's BVH and on a BVH of the cut's mesh); covered: either mesh non-black there
+    E-3   PSNR_est = -10 log10(MSE)                         (display units of white, as ``error_numbers``)
     E-4   the bound b for the next frames: the largest bound whose cut's E-3 meets the target, searched by
           bisection in log b between the largest bound that met it and the smallest that missed (``Steering``);
-          before both are known, the largest S-1 error e such that the coarse nodes at or under e add at most
-          10^(-PSNR / 10) N to E-1 (the rest are refined), or, under SLACK of the budget, b raised by
-          sqrt(budget / E-1) (at least RAISE); never by more than MAX_STEP at once
+          before both are known, the largest S-1 error e such that the coarse nodes at or under e stay within
+          the budget 10^(-PSNR / 10) N (the sampled squared error N MSE shared out over the cut's coarse nodes in
+          proportion to a model of their terms: the mean over each node's leaves of the squared T-15 residual of
+          its subtree's collapses times its projected area; the rest are refined), or, under SLACK of the budget,
+          b raised by sqrt(budget / SSE) (at least RAISE); never by more than MAX_STEP at once
 
-A coarse node's subtree loses what T-15 cannot rebuild from coarser vertices; the mean of that residual's square
-over its leaves, spread over the pixels the node covers, estimates the squared error the node adds (the S-2 bound,
-the largest residual, would bound it, but spreads one edge's step over a whole node and overestimates by orders of
-magnitude). The geometric error is held to ``pixel_tolerance`` pixels apart, and E-2 counts twice the pixels where
-front faces overlap. ``benchmarks/view_cut.py`` compares E-3 with the measured PSNR.
+E-1 measures the frame's own error the way ``lodprt.display.compare`` measures it, on a sample of its pixels:
+shading (the cut's coarse triangles interpolate what the full mesh's fine ones resolve), shadow edges, highlights
+and silhouettes alike, under the actual lights rather than the light samples' bounds, so it is neither a bound nor a
+model. Sampled on every pixel it is the measured error (to the pixel or two where a ray and the rasteriser
+disagree at an edge); on the default grid its error is the sampling's, largest where a few pixels of silhouette
+carry much of the error. ``benchmarks/view_cut.py`` compares E-3 with the measured PSNR.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import weakref
 
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.store.bake_store import radiance_toward
 
 #: E-4: raise the bound by this factor when the estimate is under SLACK of the budget; steps at most MAX_STEP
 RAISE = 1.15
@@ -51,29 +58,6 @@ def check_target(psnr) -> float | None:
     if not math.isfinite(p) or not 0 < p <= 200:
         raise LodprtError(f"target_psnr {psnr}: must be a PSNR in dB in (0, 200], or 'off'")
     return p
-
-
-def covered_pixels(positions: np.ndarray, triangles: np.ndarray, vp: np.ndarray, eye, width: int,
-                   height: int, lit: np.ndarray | None = None) -> float:
-    """E-2: the screen area in pixels of the triangles (indices into ``positions``) that face ``eye`` and lie in
-    front of it, projected by ``vp`` (projection @ view), summed and capped at the screen's; with ``lit`` (per
-    position, bool) only the triangles with a lit vertex (a frame's error is measured over the pixels either frame
-    shows non-black, ``lodprt.display.error_figure.error_numbers``: an unlit region adds no pixel)."""
-    if not len(triangles):
-        return 0.0
-    p = np.asarray(positions, np.float64)
-    t = np.asarray(triangles, np.int64)
-    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
-    front = (np.cross(b - a, c - a) * (np.asarray(eye, np.float64) - a)).sum(1) > 0
-    if lit is not None:
-        front &= np.asarray(lit, bool)[t].any(1)
-    clip = np.c_[p, np.ones(len(p))] @ np.asarray(vp, np.float64).T
-    w = clip[:, 3]
-    ok = front & (w[t] > 1e-9).all(1)
-    xy = clip[:, :2] / np.where(w > 1e-9, w, 1.0)[:, None] * (0.5 * np.array([width, height]))
-    u, v, s = xy[t[ok, 0]], xy[t[ok, 1]], xy[t[ok, 2]]
-    area = 0.5 * np.abs((v[:, 0] - u[:, 0]) * (s[:, 1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (s[:, 0] - u[:, 0]))
-    return float(min(area.sum(), width * height))
 
 
 def psnr(sse: float, covered: float) -> float:
@@ -106,7 +90,8 @@ class Steering:
     """E-4 as a search for the largest bound whose frame meets the target: the bounds tried so far bracket it,
     ``meets`` (the largest whose estimate reached the target) and ``misses`` (the smallest that did not), and the
     next bound is their geometric mean once both are known (bisection in log bound), ``steer``'s guess before. The
-    search settles on ``meets`` when the bracket is narrower than ``1 + step``; a bracket the frame no longer obeys
+    search settles on ``meets`` when the bracket is narrower than ``1 + step`` and an estimate at ``meets`` has met
+    the target since the last miss (``settled``); a bracket the frame no longer obeys
     (the camera or the lights moved) gives way to the new estimate, ``reset`` forgets it after a jump, and after
     REPROBE settled rounds it probes upward again (a frame that got easier)."""
 
@@ -115,13 +100,22 @@ class Steering:
         self.meets: float | None = None
         self.misses: float | None = None
         self.rounds_settled = 0
+        self.confirmed = False  # the last estimate was made at ``meets`` and met the target
 
     def reset(self) -> None:
         self.meets = self.misses = None
         self.rounds_settled = 0
+        self.confirmed = False
+
+    def bracketed(self) -> bool:
+        """Whether the bounds that met and missed lie within ``1 + step`` of each other."""
+        return self.meets is not None and self.misses is not None and self.misses <= self.meets * (1 + self.step)
 
     def settled(self) -> bool:
-        return self.meets is not None and self.misses is not None and self.misses <= self.meets * (1 + self.step)
+        """Bracketed, and the cut at ``meets`` met the target at its last estimate: the cut a bound gives depends
+        on the bounds before it (a node refines above the bound and collapses at or under bound / 1.25), so a
+        bound that met on the way up is estimated again on the way down before the search rests there."""
+        return self.bracketed() and self.confirmed
 
     def next_bound(self, bound: float, estimated_psnr: float, err: np.ndarray, sse: np.ndarray,
                    covered: float) -> float:
@@ -134,6 +128,10 @@ class Steering:
             self.misses = bound if self.misses is None else min(self.misses, bound)
             if self.meets is not None and self.meets >= self.misses:
                 self.meets = None
+        self.confirmed = estimated_psnr >= self.target and bound == self.meets
+        if self.bracketed() and not self.confirmed:
+            self.rounds_settled = 0
+            return float(self.meets)  # estimate the cut at the bound that met once more, as it stands now
         if self.settled():
             if self.rounds_settled < REPROBE:
                 self.rounds_settled += 1
@@ -151,44 +149,103 @@ class Steering:
         return float(min(max(new, BOUND_RANGE[0]), BOUND_RANGE[1]))
 
 
-def estimate(rt, positions: np.ndarray, triangles: np.ndarray, steering: Steering | None = None,
-             lit: np.ndarray | None = None) -> tuple[float, float | None]:
+def estimate(rt, vid: np.ndarray, triangles: np.ndarray,
+             steering: Steering | None = None) -> tuple[float, float | None]:
     """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames from ``steering`` or None without
-    one) from
-    the cut's coarse nodes (culling, footprint and S-1 error from ``Runtime.node_errors(detail_only=True)``, E-1 from
-    ``node_mean_square``) and its mesh (``positions`` of its vertices, ``triangles`` indices into them)."""
+    one): E-1 sampled on E-2's rays (``sampled_error``: the cut's mesh, ``vid`` (A,) its vertices, ``triangles``
+    indices into them, against the full mesh, both relit under the current lights); E-4 shares it out over the
+    cut's coarse nodes in proportion to their modelled terms (culling, footprint and S-1 error from
+    ``Runtime.node_errors(detail_only=True)``, the residual from ``node_mean_square``)."""
+    face, bary, cell = screen_hits(rt)
+    sample = sampled_error(rt, vid, triangles, face, bary)
+    cov = cell * sample.covered
+    est = psnr(sample.mean * cov, cov)
+    if steering is None:
+        return est, None
     cam = rt.camera
     act = np.flatnonzero(rt.cut.active)
     nodes = act[act >= rt.h.num_vertices]
     ne = rt.node_errors(nodes, exact=False, detail_only=True)
     ms = node_mean_square(rt, nodes)
     area = np.clip(projected_area(rt, nodes), 1.0, float(cam.width * cam.height))  # at least the pixel it decides
-    face, cell = screen_hits(rt)
     seen = rt.faces[face[face >= 0]]  # (hits, 3) leaves of the faces the rays met first
     hidden = np.ones(rt.h.num_nodes, bool)
     hidden[rt.cut.anc[seen.ravel()]] = False
     hidden = hidden[nodes] & (area >= 2.0 * cell)  # no ray met a node large enough to be met: hidden behind others
     sse = np.where(ne.culled | hidden, 0.0, ms * area)
-    cov = cell * float(lit[seen].any(1).sum()) if lit is not None else \
-        covered_pixels(positions, triangles, rt.vp, cam.eye, cam.width, cam.height)
-    est = psnr(float(sse.sum()), cov)
-    new = None if steering is None else steering.next_bound(rt.error_bound, est, ne.error, sse, cov)
-    return est, new
+    model = float(sse.sum())
+    if model > 0:  # E-4: the nodes' shares of the sampled error, in proportion to their modelled terms
+        sse *= sample.mean * cov / model
+    return est, steering.next_bound(rt.error_bound, est, ne.error, sse, cov)
 
 
-#: E-2: about this many coverage rays per frame, one per square cell of the screen (at least a pixel)
-COVERAGE_RAYS = 10_000
+@dataclasses.dataclass(frozen=True)
+class SampledError:
+    """E-1 on the screen grid: ``mean`` the mean over the covered rays of the squared display difference (units of
+    white squared, channels averaged, both clipped at white), ``covered`` the rays either mesh shows non-black."""
+
+    mean: float
+    covered: int
+
+
+def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, face: np.ndarray, bary: np.ndarray) -> SampledError:
+    """E-1: per ray of E-2's grid (``face``, ``bary``: its first face of the full mesh and where on it), the full
+    mesh's radiance there against the cut's (the same ray through the cut's mesh: ``vid`` (A,) its vertices,
+    ``triangles`` (M, 3) indices into them), each as the renderer draws a fragment: the face's corners relit under
+    the current lights (``Runtime.relit``, T-7 with M-1), their coefficients interpolated at the hit and evaluated
+    toward the eye; clipped at white, the squared difference averaged over RGB, over the rays where either is
+    non-black (what ``lodprt.display.error_figure.error_numbers`` averages over the pixels)."""
+    vid = np.asarray(vid, np.int64)
+    cface, cbary = np.full(len(face), -1), None
+    if len(triangles):
+        cface, cbary = screen_hits(rt, cut_bvh(rt, vid, triangles))[:2]
+    full_hit, cut_hit = face >= 0, cface >= 0
+    corners = [rt.faces[face[full_hit]].astype(np.int64),  # (F, 3) original vertices
+               vid[np.asarray(triangles, np.int64)[cface[cut_hit]]] if cut_hit.any() else np.zeros((0, 3), np.int64)]
+    ids, inverse = np.unique(np.concatenate([c.ravel() for c in corners]), return_inverse=True)
+    coef = rt.relit(ids)[0] if len(ids) else None
+    white = float(rt.white)
+    drawn = []
+    for hit, w, k in ((full_hit, bary, inverse[:corners[0].size]), (cut_hit, cbary, inverse[corners[0].size:])):
+        out = np.zeros((len(face), 3))
+        if hit.any():
+            k = k.reshape(-1, 3)
+            w = w[hit].astype(np.float64)
+            at = lambda a: np.einsum("rk,rk...->r...", w, np.asarray(a, np.float64)[k])  # noqa: E731
+            out[hit] = radiance_toward(at(rt.positions[ids]), at(rt.normals[ids]), at(coef), rt.camera.eye,
+                                       np.ones(3))
+        drawn.append(out)
+    a, b = drawn
+    covered = (a.max(1) > 0) | (b.max(1) > 0)
+    d2 = ((np.minimum(a, white) - np.minimum(b, white))[covered] ** 2).mean(1) / white**2
+    return SampledError(float(d2.mean()) if len(d2) else 0.0, int(len(d2)))
+
+
+def cut_bvh(rt, vid: np.ndarray, triangles: np.ndarray):
+    """Warp mesh (BVH) of a cut's mesh on the Runtime ``rt``'s device: vertices ``positions[vid]``, faces
+    ``triangles`` (indices into ``vid``), for E-1's rays."""
+    import warp as wp
+
+    pts = np.ascontiguousarray(rt.positions[np.asarray(vid, np.int64)], np.float32)
+    return wp.Mesh(points=wp.array(pts, dtype=wp.vec3, device=rt.device),
+                   indices=wp.array(np.ascontiguousarray(triangles, np.int32).ravel(), dtype=wp.int32,
+                                    device=rt.device))
+
+
+#: E-1, E-2: about this many primary rays per frame, one per square cell of the screen (at least a pixel)
+COVERAGE_RAYS = 30_000
 
 
 def coverage_stride(width: int, height: int) -> int:
-    """E-2: the side in pixels of the square screen cells, one coverage ray each (about COVERAGE_RAYS)."""
+    """E-2: the side in pixels of the square screen cells, one ray each (about COVERAGE_RAYS)."""
     return max(1, int(math.sqrt(width * height / COVERAGE_RAYS)))
 
 
-def screen_hits(rt) -> tuple[np.ndarray, float]:
-    """E-2's rays: the first face of the store's full mesh (-1: none) that a primary ray through the centre of each
-    ``coverage_stride`` square cell of the screen meets (``kernels.runtime.first_hits``, the scene's
-    BVH), and the pixels one cell stands for."""
+def screen_hits(rt, mesh=None) -> tuple[np.ndarray, np.ndarray, float]:
+    """E-1, E-2's rays: the first face of ``mesh`` (default the store's full mesh: ``Runtime.scene_bvh``, face ids
+    as in ``faces``; -1: none) that a primary ray through the centre of each ``coverage_stride`` square cell of the
+    screen meets, the hit's barycentric weights of that face's corners (``kernels.runtime.first_hits``), and the
+    pixels one cell stands for."""
     import warp as wp
 
     from lodprt.kernels import runtime as kr
@@ -205,12 +262,13 @@ def screen_hits(rt) -> tuple[np.ndarray, float]:
 
     corner = ray(-1.0, 1.0)
     du, dv = (ray(1.0, 1.0) - corner) / cols, (ray(-1.0, -1.0) - corner) / rows
-    mesh = rt.scene_bvh()
+    mesh = rt.scene_bvh() if mesh is None else mesh
     face = wp.zeros(cols * rows, dtype=wp.int32, device=rt.device)
+    bary = wp.zeros(cols * rows, dtype=wp.vec3, device=rt.device)
     vec = lambda a: wp.vec3(*map(float, a))  # noqa: E731
     wp.launch(kr.first_hits, dim=cols * rows, inputs=[mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
-              outputs=[face], device=rt.device)
-    return face.numpy(), cam.width * cam.height / (cols * rows)
+              outputs=[face, bary], device=rt.device)
+    return face.numpy(), bary.numpy(), cam.width * cam.height / (cols * rows)
 
 
 _SURFACE: dict = {}  # id(hierarchy) -> (weak reference to it, (N,) float32 surface area under each node)

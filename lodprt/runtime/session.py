@@ -171,9 +171,8 @@ class Runtime:
         self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
             self._node_bounds(self.criterion.NODE_BOUNDS[0])
-            if self.steering is not None:  # E-1 and E-2's per-sample arrays, made with each sample from the first
+            if self.steering is not None:  # E-4's per-sample arrays, made with each sample from the first
                 frame_error.derive_mean_square(self, self._levels)
-                self._derive_lit()
         self.set_lights(self.interp.samples[len(self.interp.samples) // 2][None, :])
 
     # -- set-up ------------------------------------------------------------------------------------------------
@@ -413,25 +412,26 @@ class Runtime:
         return vid, np.take(lut, self._tri.faces(self.cut.anc))
 
     def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, *, steer: bool = True) -> None:
-        """E-1..E-3 of the current cut (``estimated_psnr``) and, with a target_psnr and ``steer``, E-4: the bound
-        for the next frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the
-        cached errors stay: a node cached under the old bound is evaluated again when due)."""
-        self.estimated_psnr, new = frame_error.estimate(self, self.positions[vid], tri,
-                                                        self.steering if steer else None, lit=self.lit_vertices())
+        """E-1..E-3 of the current cut (``estimated_psnr``; ``vid``, ``tri``: its mesh as ``_cut_mesh`` gives it)
+        and, with a target_psnr and ``steer``, E-4: the bound for the next frames from the steering's search
+        (``frame_error.Steering``, settled within STEER_STEP; the cached errors stay: a node cached under the old
+        bound is evaluated again when due)."""
+        self.estimated_psnr, new = frame_error.estimate(self, vid, tri, self.steering if steer else None)
         if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
 
-    def lit_vertices(self) -> np.ndarray:
-        """(V,) bool: whether each vertex has any radiance at one of the samples in use (the field drawn at each,
-        ``SampleCache``), for E-2's count of the pixels a frame shows non-black."""
-        return self._derive_lit()[:, self.used_slots].any(1)
-
-    def _derive_lit(self) -> np.ndarray:
-        """(V, slots) bool per sample slot: any radiance in the field drawn at the sample (made with each sample)."""
-        cache = self.samples
-        if "lit" not in cache.derived:
-            cache.derive("lit", lambda c: (c.reshape(len(c), -1) != 0).any(1), self.h.num_vertices, (), bool)
-        return cache.derived["lit"][0]
+    def relit(self, vertex_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((K, 3, ncoef) coefficients, (K, 3) radiance toward the eye) float32 of ``vertex_ids`` under the current
+        lights, as a frame relights its vertices (T-7 with M-1; any vertex, in the cut or not), leaving the last
+        frame's relighting state (M-6's lit lights) as it was."""
+        lighting = self.lighting
+        kept = lighting.frame_lit, None if lighting.direct is None else lighting.direct.lit
+        try:
+            return self._relight(np.asarray(vertex_ids, np.int64))
+        finally:
+            lighting.frame_lit = kept[0]
+            if lighting.direct is not None:
+                lighting.direct.lit = kept[1]
 
     def scene_bvh(self):
         """Warp mesh (BVH) of the store's triangles on the Runtime's device, face ids as in ``faces``: the direct
@@ -463,29 +463,27 @@ class Runtime:
         t2 = time.perf_counter()
         every = ESTIMATE_FRAMES * (2 if self.steering is not None and self.steering.settled() else 1)
         due = settle or self.errors.frame % every == 0  # E-4 every few frames, half as often once settled
+        counts = (refined, coarsened, touched, passes)
+        coef = rad = None
         if self.lod and self.target_psnr is not None and due:  # E-4: steer the bound; the first frame until it holds
             for _ in range(FIRST_ROUNDS if settle else 1):
+                if settle:  # M-6 first: each round's estimate sees the cut the frame draws at that bound
+                    vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts)
                 self.estimate_frame_error(vid, tri)
                 if not settle or not self.refinement.dirty:
                     break
-                more = self._converge(10_000)
-                refined, coarsened, touched, passes = (a + b for a, b in zip((refined, coarsened, touched, passes),
-                                                                             more))
+                counts = tuple(a + b for a, b in zip(counts, self._converge(10_000)))
                 vid, tri = self._cut_mesh()
+                coef = None
         steer = time.perf_counter() - t2  # the estimate and steering count as cut work
-        coef, rad = self._relight(vid)
+        if coef is None:
+            coef, rad = self._relight(vid)
         t3 = time.perf_counter()
-        if self._shadow_edges(vid, tri, rad) and settle:  # M-6: the first frame follows the light's shadow edges
-            for _ in range(EDGE_ROUNDS):
-                more = self._converge(10_000)
-                refined, coarsened, touched, passes = (a + b for a, b in zip((refined, coarsened, touched, passes),
-                                                                             more))
-                if more[0] == 0:
-                    break
-                vid, tri = self._cut_mesh()
-                coef, rad = self._relight(vid)
-                if not self._shadow_edges(vid, tri, rad):
-                    break
+        if settle:  # M-6: the first frame follows the light's shadow edges
+            vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts, (coef, rad))
+        else:
+            self._shadow_edges(vid, tri, rad)
+        refined, coarsened, touched, passes = counts
         steer += time.perf_counter() - t3  # M-6 (and its first-frame rounds) count as cut work
         t3 = time.perf_counter()
         if self.triangle_budget is not None:  # steer the bound toward the budget
@@ -513,6 +511,25 @@ class Runtime:
                      normals=np.take(self.normals, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
+
+    def _edge_rounds(self, vid, tri, counts: tuple, relit: tuple | None = None) -> tuple:
+        """M-6 on a first frame: relight the cut (unless ``relit`` holds its (coefficients, radiance)), then refine
+        along the actual lights' shadow edges until no straddling step is over the bound (at most EDGE_ROUNDS
+        rounds). Returns (vid, tri, coefficients, radiance, ``counts`` (refined, coarsened, touched, passes) plus
+        this work's)."""
+        coef, rad = self._relight(vid) if relit is None else relit
+        if not self._shadow_edges(vid, tri, rad):
+            return vid, tri, coef, rad, counts
+        for _ in range(EDGE_ROUNDS):
+            more = self._converge(10_000)
+            counts = tuple(a + b for a, b in zip(counts, more))
+            if more[0] == 0:
+                break
+            vid, tri = self._cut_mesh()
+            coef, rad = self._relight(vid)
+            if not self._shadow_edges(vid, tri, rad):
+                break
+        return vid, tri, coef, rad, counts
 
     def _shadow_edges(self, vid: np.ndarray, tri: np.ndarray, rad: np.ndarray) -> bool:
         """M-6 from the relight of ``vid``: the errors of the nodes whose cut triangles straddle the actual lights'
