@@ -129,7 +129,11 @@ def kill_at(cmd, partial_glob, ready, deadline=60.0):
 
 
 def hierarchy_building(folder):
-    return is_complete(folder / "scene") and not (folder / "hierarchy" / "zarr.json").exists()
+    """The bake has made its partial folder (owner record first) and not yet written its scene: it is loading the
+    kernels or building the hierarchy, which come before the scene and the hierarchy are written (a window of
+    about a second, where the one after the scene's completion mark lasts milliseconds and a loaded machine let
+    the bake finish inside it)."""
+    return (folder / OWNER_FILE).is_file() and not is_complete(folder / "scene")
 
 
 def samples_half_done(folder):
