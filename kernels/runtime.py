@@ -287,6 +287,7 @@ def relight(
 
 @wp.kernel
 def first_hits(
+    offset: int,  # In: first cell of this launch (a launch may cover a slice of the cells)
     mesh: wp.uint64,  # In: BVH of the whole scene
     eye: wp.vec3,  # In: camera position
     corner: wp.vec3,  # In: direction (unnormalised) from the eye through the corner of grid cell (0, 0)
@@ -300,7 +301,7 @@ def first_hits(
 ):
     """E-1, E-2 (docs/RUNTIME.md): one primary ray from the eye through the centre of each cell of a screen grid,
     the first face it meets and where on it."""
-    k = wp.tid()
+    k = wp.tid() + offset
     i = k % columns
     j = k / columns
     d = corner + (float(i) + 0.5) * du + (float(j) + 0.5) * dv
@@ -310,3 +311,41 @@ def first_hits(
     if q.result:
         face[k] = q.face
         bary[k] = wp.vec3(q.u, q.v, 1.0 - q.u - q.v)  # Warp's hit point: u p0 + v p1 + (1 - u - v) p2
+
+
+@wp.kernel
+def hit_radiance(
+    offset: int,  # In: first ray of this launch (a launch may cover a slice of the rays)
+    corners: wp.array2d(dtype=wp.int32),  # In: (R, 3) rows (of the arrays below) of the corners of the face each
+    #                                              ray met, in the face's index order; -1 in column 0: none
+    bary: wp.array(dtype=wp.vec3),  # In: (R,) the hit's barycentric weights of those corners (first_hits)
+    positions: wp.array(dtype=wp.vec3),  # In: (A,) corner positions
+    normals: wp.array(dtype=wp.vec3),  # In: (A,) corner normals (view direction for an eye on the point)
+    coeffs: wp.array3d(dtype=wp.float32),  # In: (A, 3, ncoef) corner RGB coefficients; ncoef = 1 or order^2
+    eye: wp.vec3,  # In: camera position
+    basis: wp.array2d(dtype=wp.float32),  # Scratch: (R, >= ncoef)
+    radiance: wp.array2d(dtype=wp.float32),  # Out: (R, 3) radiance toward the eye at the hit, 0 for no hit
+):
+    """E-1 (docs/RUNTIME.md): what the renderer draws at a ray's hit, as a fragment there: the corners' positions,
+    normals and coefficients interpolated with the hit's barycentric weights, then T-7 toward the eye."""
+    k = wp.tid() + offset
+    radiance[k, 0] = 0.0
+    radiance[k, 1] = 0.0
+    radiance[k, 2] = 0.0
+    a = corners[k, 0]
+    if a < 0:
+        return
+    b = corners[k, 1]
+    c = corners[k, 2]
+    w = bary[k]
+    p = w[0] * positions[a] + w[1] * positions[b] + w[2] * positions[c]
+    dv = eye - p
+    if wp.length(dv) <= 0.0:
+        dv = w[0] * normals[a] + w[1] * normals[b] + w[2] * normals[c]
+    ncoef = wp.min(coeffs.shape[2], basis.shape[1])
+    sh_basis_fast(dv, bands_of(ncoef), basis, k)
+    for ch in range(3):
+        r = float(0.0)
+        for i in range(ncoef):  # T-7 of the interpolated coefficients
+            r += (w[0] * coeffs[a, ch, i] + w[1] * coeffs[b, ch, i] + w[2] * coeffs[c, ch, i]) * basis[k, i]
+        radiance[k, ch] = r

@@ -59,8 +59,10 @@ def test_first_hits_agree_with_a_second_ray_caster(device):
     face = wp.zeros(cols * rows, dtype=wp.int32, device=device)
     bary = wp.zeros(cols * rows, dtype=wp.vec3, device=device)
     vec = lambda a: wp.vec3(*map(float, a))  # noqa: E731
-    wp.launch(kr.first_hits, dim=cols * rows, inputs=[mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
-              outputs=[face, bary], device=device)
+    half = cols * rows // 2 + 5  # two launches, as the run time slices them over the cores: the offset places them
+    for a, b in ((0, half), (half, cols * rows)):
+        wp.launch(kr.first_hits, dim=b - a, inputs=[a, mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
+                  outputs=[face, bary], device=device)
     i, j = np.meshgrid(np.arange(cols), np.arange(rows))
     dirs = corner + (i.ravel()[:, None] + 0.5) * du + (j.ravel()[:, None] + 0.5) * dv
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -76,6 +78,46 @@ def test_first_hits_agree_with_a_second_ray_caster(device):
     assert (w[hit] >= -1e-5).all() and (w[hit] > 0.05).all(1).any()  # inside the face, and not only its corners
     at = (w[hit][:, :, None] * pts[faces[got[hit]]]).sum(1)  # the weights' point on the face the kernel met
     np.testing.assert_allclose(at, eye + t[hit, None] * dirs[hit], atol=1e-4)
+
+
+@pytest.mark.warp_debug
+@pytest.mark.parametrize("ncoef", [1, 16])
+def test_hit_radiance_is_the_interpolated_fragment(device, ncoef):
+    """E-1's fragment at a hit (``kernels.runtime.hit_radiance``) equals the float64 reference: the corners'
+    positions, normals and coefficients interpolated with the hit's weights, then T-7 toward the eye
+    (``radiance_toward``, scipy-checked SH); rays that met nothing read 0. Both SH widths a relit store gives (y_0
+    of a diffuse-only store, order 4), in two launches (the offset), bounds-checked."""
+    import warp as wp
+
+    from lodprt.kernels import runtime as kr
+    from lodprt.store.bake_store import radiance_toward
+
+    wp.init()
+    rng = np.random.default_rng(7)
+    A, R = 40, 300
+    pos = rng.normal(size=(A, 3))
+    nrm = rng.normal(size=(A, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    coef = rng.normal(size=(A, 3, ncoef))
+    rows = np.stack([rng.choice(A, 3, replace=False) for _ in range(R)]).astype(np.int32)
+    rows[::7] = -1  # rays that met nothing
+    w = rng.dirichlet(np.ones(3), R)
+    eye = np.array([0.3, 4.0, -2.5])
+    out = wp.zeros((R, 3), dtype=wp.float32, device=device)
+    args = [wp.array(rows, dtype=wp.int32, device=device), wp.array(w.astype(np.float32), dtype=wp.vec3,
+                                                                     device=device),
+            wp.array(pos.astype(np.float32), dtype=wp.vec3, device=device),
+            wp.array(nrm.astype(np.float32), dtype=wp.vec3, device=device),
+            wp.array(coef.astype(np.float32), dtype=wp.float32, device=device), wp.vec3(*map(float, eye)),
+            wp.empty((R, ncoef), dtype=wp.float32, device=device)]
+    for a, b in ((0, 123), (123, R)):
+        wp.launch(kr.hit_radiance, dim=b - a, inputs=[a] + args, outputs=[out], device=device)
+    got = out.numpy()
+    hit = rows[:, 0] >= 0
+    at = lambda x: np.einsum("rk,rk...->r...", w[hit], x[rows[hit]])  # noqa: E731
+    want = radiance_toward(at(pos), at(nrm), at(coef), eye, np.ones(3))
+    np.testing.assert_allclose(got[hit], want, rtol=1e-4, atol=1e-4 * np.abs(want).max())
+    assert np.all(got[~hit] == 0)
 
 
 @pytest.mark.usefixtures("gl")

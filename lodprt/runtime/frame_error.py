@@ -34,7 +34,6 @@ import weakref
 import numpy as np
 
 from lodprt.errors import LodprtError
-from lodprt.store.bake_store import radiance_toward
 
 #: E-4: raise the bound by this factor when the estimate is under SLACK of the budget; steps at most MAX_STEP
 RAISE = 1.15
@@ -149,15 +148,15 @@ class Steering:
         return float(min(max(new, BOUND_RANGE[0]), BOUND_RANGE[1]))
 
 
-def estimate(rt, vid: np.ndarray, triangles: np.ndarray,
-             steering: Steering | None = None) -> tuple[float, float | None]:
+def estimate(rt, vid: np.ndarray, triangles: np.ndarray, steering: Steering | None = None,
+             coefficients: np.ndarray | None = None) -> tuple[float, float | None]:
     """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames from ``steering`` or None without
     one): E-1 sampled on E-2's rays (``sampled_error``: the cut's mesh, ``vid`` (A,) its vertices, ``triangles``
     indices into them, against the full mesh, both relit under the current lights); E-4 shares it out over the
     cut's coarse nodes in proportion to their modelled terms (culling, footprint and S-1 error from
     ``Runtime.node_errors(detail_only=True)``, the residual from ``node_mean_square``)."""
     face, bary, cell = screen_hits(rt)
-    sample = sampled_error(rt, vid, triangles, face, bary)
+    sample = sampled_error(rt, vid, triangles, face, bary, coefficients)
     cov = cell * sample.covered
     est = psnr(sample.mean * cov, cov)
     if steering is None:
@@ -188,37 +187,64 @@ class SampledError:
     covered: int
 
 
-def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, face: np.ndarray, bary: np.ndarray) -> SampledError:
+def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, face: np.ndarray, bary: np.ndarray,
+                  coefficients: np.ndarray | None = None) -> SampledError:
     """E-1: per ray of E-2's grid (``face``, ``bary``: its first face of the full mesh and where on it), the full
     mesh's radiance there against the cut's (the same ray through the cut's mesh: ``vid`` (A,) its vertices,
-    ``triangles`` (M, 3) indices into them), each as the renderer draws a fragment: the face's corners relit under
-    the current lights (``Runtime.relit``, T-7 with M-1), their coefficients interpolated at the hit and evaluated
-    toward the eye; clipped at white, the squared difference averaged over RGB, over the rays where either is
-    non-black (what ``lodprt.display.error_figure.error_numbers`` averages over the pixels)."""
+    ``triangles`` (M, 3) indices into them, ``coefficients`` (A, 3, ncoef) their relit ones if the frame has them),
+    each as the renderer draws a fragment: the face's corners relit under the current lights (``Runtime.relit``,
+    T-7 with M-1), their positions, normals and coefficients interpolated at the hit and evaluated toward the eye
+    (``kernels.runtime.hit_radiance``); clipped at white, the squared difference averaged over RGB, over the rays
+    where either is non-black (what ``lodprt.display.error_figure.error_numbers`` averages over the pixels)."""
     vid = np.asarray(vid, np.int64)
-    cface, cbary = np.full(len(face), -1), None
+    R = len(face)
+    cface, cbary = np.full(R, -1, np.int32), np.zeros((R, 3), np.float32)
     if len(triangles):
         cface, cbary = screen_hits(rt, cut_bvh(rt, vid, triangles))[:2]
-    full_hit, cut_hit = face >= 0, cface >= 0
-    corners = [rt.faces[face[full_hit]].astype(np.int64),  # (F, 3) original vertices
-               vid[np.asarray(triangles, np.int64)[cface[cut_hit]]] if cut_hit.any() else np.zeros((0, 3), np.int64)]
-    ids, inverse = np.unique(np.concatenate([c.ravel() for c in corners]), return_inverse=True)
-    coef = rt.relit(ids)[0] if len(ids) else None
+    hit, chit = face >= 0, cface >= 0
+    cut_corners = np.asarray(triangles, np.int64)[cface[chit]]  # (hits, 3) rows of vid
+    if coefficients is None:  # relight the cut's corners with the full mesh's
+        corners = np.concatenate([rt.faces[face[hit]], vid[cut_corners]])
+        ids, inverse = np.unique(corners, return_inverse=True)
+        rows = inverse.reshape(-1, 3)
+        coef = rt.relit(ids)[0] if len(ids) else np.zeros((0, 3, 1), np.float32)
+    else:  # the cut's rows as the frame relit them, after the full mesh's corners
+        ids, inverse = np.unique(rt.faces[face[hit]], return_inverse=True)
+        rows = np.concatenate([inverse.reshape(-1, 3), cut_corners + len(ids)])
+        ids = np.concatenate([ids, vid])
+        coef = rt.relit(ids[: len(ids) - len(vid)])[0] if len(ids) > len(vid) else None
+        coef = np.asarray(coefficients) if coef is None else np.concatenate([coef, coefficients])
+    corner_rows = np.full((2 * R, 3), -1, np.int32)  # rays 0..R-1 through the full mesh, R..2R-1 through the cut
+    corner_rows[np.concatenate([hit, chit])] = rows
+    drawn = hit_radiance(rt, corner_rows, np.concatenate([bary, cbary]), ids, coef)
+    a, b = drawn[:R].astype(np.float64), drawn[R:].astype(np.float64)
     white = float(rt.white)
-    drawn = []
-    for hit, w, k in ((full_hit, bary, inverse[:corners[0].size]), (cut_hit, cbary, inverse[corners[0].size:])):
-        out = np.zeros((len(face), 3))
-        if hit.any():
-            k = k.reshape(-1, 3)
-            w = w[hit].astype(np.float64)
-            at = lambda a: np.einsum("rk,rk...->r...", w, np.asarray(a, np.float64)[k])  # noqa: E731
-            out[hit] = radiance_toward(at(rt.positions[ids]), at(rt.normals[ids]), at(coef), rt.camera.eye,
-                                       np.ones(3))
-        drawn.append(out)
-    a, b = drawn
     covered = (a.max(1) > 0) | (b.max(1) > 0)
     d2 = ((np.minimum(a, white) - np.minimum(b, white))[covered] ** 2).mean(1) / white**2
     return SampledError(float(d2.mean()) if len(d2) else 0.0, int(len(d2)))
+
+
+def hit_radiance(rt, corner_rows: np.ndarray, bary: np.ndarray, ids: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """(R, 3) float32 what the renderer draws at each ray's hit (``kernels.runtime.hit_radiance``, sliced over the
+    cores): ``corner_rows`` (R, 3) rows of ``ids`` (the corner vertices) and of their relit ``coef`` (K, 3, ncoef),
+    -1 where the ray met nothing; ``bary`` (R, 3) the hit's weights."""
+    import warp as wp
+
+    from lodprt.kernels import runtime as kr
+
+    R = len(corner_rows)
+    if not len(ids) or not R:
+        return np.zeros((R, 3), np.float32)
+    dev, copy = rt.device, rt.device != "cpu"
+    arr = lambda a, dtype: wp.array(np.ascontiguousarray(a, np.float32 if dtype != wp.int32 else np.int32),  # noqa
+                                    dtype=dtype, device=dev, copy=copy)
+    coef = np.ascontiguousarray(coef, np.float32)
+    rad = wp.zeros((R, 3), dtype=wp.float32, device=dev)
+    rt.launch_rows(kr.hit_radiance, R, [
+        arr(corner_rows, wp.int32), arr(bary, wp.vec3), arr(rt.positions[ids], wp.vec3),
+        arr(rt.normals[ids], wp.vec3), wp.array(coef, dtype=wp.float32, device=dev, copy=copy),
+        wp.vec3(*map(float, rt.camera.eye)), wp.empty((R, coef.shape[2]), dtype=wp.float32, device=dev)], [rad])
+    return rad.numpy()
 
 
 def cut_bvh(rt, vid: np.ndarray, triangles: np.ndarray):
@@ -266,8 +292,8 @@ def screen_hits(rt, mesh=None) -> tuple[np.ndarray, np.ndarray, float]:
     face = wp.zeros(cols * rows, dtype=wp.int32, device=rt.device)
     bary = wp.zeros(cols * rows, dtype=wp.vec3, device=rt.device)
     vec = lambda a: wp.vec3(*map(float, a))  # noqa: E731
-    wp.launch(kr.first_hits, dim=cols * rows, inputs=[mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
-              outputs=[face, bary], device=rt.device)
+    rt.launch_rows(kr.first_hits, cols * rows, [mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
+                   [face, bary])  # sliced over the cores on the CPU
     return face.numpy(), bary.numpy(), cam.width * cam.height / (cols * rows)
 
 

@@ -267,7 +267,7 @@ class Runtime:
             "radius": f1(self.radius), "positions": v3(self.positions), "normals": v3(self.normals),
         }
 
-    def _launch(self, kernel, rows: int, inputs: list, outputs: list) -> None:
+    def launch_rows(self, kernel, rows: int, inputs: list, outputs: list) -> None:
         """Launch ``kernel`` over ``rows`` rows, each launch taking its first row as ``offset``: on the CPU in slices
         over the cores (``lodprt.launches.KernelThreads``: Warp runs a CPU launch on one thread and releases the
         GIL), one launch on a GPU."""
@@ -373,7 +373,7 @@ class Runtime:
             used, weights = self._frame_inputs()
             bounds = self._kernel_bounds(exact)
             mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height)
-            self._launch(kr.view_errors, K, [
+            self.launch_rows(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["positions"], d["vertex"],
                 d["children"], d["error_vector"], d["axis"], d["half"], d["radius"],
                 wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
@@ -411,12 +411,15 @@ class Runtime:
         lut[vid] = np.arange(len(vid), dtype=np.int32)
         return vid, np.take(lut, self._tri.faces(self.cut.anc))
 
-    def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, *, steer: bool = True) -> None:
-        """E-1..E-3 of the current cut (``estimated_psnr``; ``vid``, ``tri``: its mesh as ``_cut_mesh`` gives it)
-        and, with a target_psnr and ``steer``, E-4: the bound for the next frames from the steering's search
+    def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, coefficients: np.ndarray | None = None, *,
+                             steer: bool = True) -> None:
+        """E-1..E-3 of the current cut (``estimated_psnr``; ``vid``, ``tri``: its mesh as ``_cut_mesh`` gives it,
+        ``coefficients``: its relit (A, 3, ncoef) ones when the frame has them, else relit here) and, with a
+        target_psnr and ``steer``, E-4: the bound for the next frames from the steering's search
         (``frame_error.Steering``, settled within STEER_STEP; the cached errors stay: a node cached under the old
         bound is evaluated again when due)."""
-        self.estimated_psnr, new = frame_error.estimate(self, vid, tri, self.steering if steer else None)
+        self.estimated_psnr, new = frame_error.estimate(self, vid, tri, self.steering if steer else None,
+                                                        coefficients)
         if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
 
@@ -465,12 +468,13 @@ class Runtime:
         due = settle or self.errors.frame % every == 0  # E-4 every few frames, half as often once settled
         counts = (refined, coarsened, touched, passes)
         coef = rad = None
-        if self.lod and self.target_psnr is not None and due:  # E-4: steer the bound; the first frame until it holds
-            for _ in range(FIRST_ROUNDS if settle else 1):
-                if settle:  # M-6 first: each round's estimate sees the cut the frame draws at that bound
-                    vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts)
-                self.estimate_frame_error(vid, tri)
-                if not settle or not self.refinement.dirty:
+        estimating = self.lod and self.target_psnr is not None and due  # E-4: steer the bound
+        if estimating and settle:  # the first frame steers until the target holds
+            for _ in range(FIRST_ROUNDS):
+                # M-6 first: each round's estimate sees the cut the frame draws at that bound
+                vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts)
+                self.estimate_frame_error(vid, tri, coef)
+                if not self.refinement.dirty:
                     break
                 counts = tuple(a + b for a, b in zip(counts, self._converge(10_000)))
                 vid, tri = self._cut_mesh()
@@ -479,6 +483,8 @@ class Runtime:
         if coef is None:
             coef, rad = self._relight(vid)
         t3 = time.perf_counter()
+        if estimating and not settle:  # from this frame's relit cut; the bound moves for the next frames
+            self.estimate_frame_error(vid, tri, coef)
         if settle:  # M-6: the first frame follows the light's shadow edges
             vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts, (coef, rad))
         else:
@@ -561,7 +567,7 @@ class Runtime:
     def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, 3, ncoef) coefficients and (A, 3) radiance toward the eye of vertices ``vid``
         (``Relighting.relight_vertices``: T-7, with the direct term M-1)."""
-        return self.lighting.relight_vertices(vid, self.camera.eye, self._d, self._frame_inputs, self._launch)
+        return self.lighting.relight_vertices(vid, self.camera.eye, self._d, self._frame_inputs, self.launch_rows)
 
     # -- full resolution ---------------------------------------------------------------------------------------
     def coefficients(self, vertex_ids=None) -> np.ndarray:
