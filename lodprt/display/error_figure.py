@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from lodprt.runtime.frame_error import clipped_mse
+
 #: the colour map of the error panels: its zero (dark purple) differs from the black background, so the covered
 #: region shows where the error is zero
 ERROR_CMAP = "viridis"
@@ -33,7 +35,7 @@ def error_numbers(a, b, white: float) -> tuple[dict, np.ndarray, np.ndarray]:
     if not d.size:
         return ({"psnr_db": float("inf"), "relative_rmse": 0.0, "mean_difference": 0.0, "max_difference": 0.0,
                  "p99_difference": 0.0}, rel, covered)
-    mse = float(np.mean((np.minimum(a, white) - np.minimum(b, white))[covered] ** 2)) / white**2
+    mse = clipped_mse(a, b, white)[0]
     rms_b = max(float(np.sqrt(np.mean(b[covered] ** 2))), 1e-30)
     numbers = {"psnr_db": float(10 * np.log10(1.0 / mse)) if mse > 0 else float("inf"),
                "relative_rmse": float(np.sqrt(np.mean((a - b)[covered] ** 2)) / rms_b),

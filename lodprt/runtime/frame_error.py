@@ -217,11 +217,19 @@ def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, face: np.ndarray, 
     corner_rows = np.full((2 * R, 3), -1, np.int32)  # rays 0..R-1 through the full mesh, R..2R-1 through the cut
     corner_rows[np.concatenate([hit, chit])] = rows
     drawn = hit_radiance(rt, corner_rows, np.concatenate([bary, cbary]), ids, coef)
-    a, b = drawn[:R].astype(np.float64), drawn[R:].astype(np.float64)
-    white = float(rt.white)
-    covered = (a.max(1) > 0) | (b.max(1) > 0)
-    d2 = ((np.minimum(a, white) - np.minimum(b, white))[covered] ** 2).mean(1) / white**2
-    return SampledError(float(d2.mean()) if len(d2) else 0.0, int(len(d2)))
+    return SampledError(*clipped_mse(drawn[R:], drawn[:R], rt.white))
+
+
+def clipped_mse(a: np.ndarray, b: np.ndarray, white: float) -> tuple[float, int]:
+    """(mean squared difference, entries it is over) of radiance ``a`` against ``b`` (..., 3), both clipped at
+    ``white``, in units of white squared, averaged over RGB and over the entries where either is non-black: E-1's
+    and the measured frame error's (``lodprt.display.error_figure.error_numbers``) PSNR is -10 log10 of it."""
+    a, b, white = np.asarray(a, np.float64), np.asarray(b, np.float64), float(white)
+    covered = (a.max(-1) > 0) | (b.max(-1) > 0)
+    n = int(covered.sum())
+    if not n:
+        return 0.0, 0
+    return float(np.mean((np.minimum(a, white) - np.minimum(b, white))[covered] ** 2)) / white**2, n
 
 
 def hit_radiance(rt, corner_rows: np.ndarray, bary: np.ndarray, ids: np.ndarray, coef: np.ndarray) -> np.ndarray:
