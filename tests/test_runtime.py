@@ -347,6 +347,8 @@ def test_cli_frames_json(bunny_bake, capsys):
     assert len(doc["frames"]) == 6
     assert all(0 < f["triangles"] < doc["summary"]["full_triangles"] for f in doc["frames"])
     assert doc["summary"]["median_ms"] > 0
+    later = [f["ms_total"] for f in doc["frames"][1:]]  # the mean counts every frame after the first
+    assert doc["summary"]["mean_ms"] == pytest.approx(sum(later) / len(later))
     assert main(["frames", str(bunny_bake), "--frames", "0"]) == 2
 
 
