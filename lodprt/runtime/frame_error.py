@@ -4,8 +4,9 @@ per-node bound toward a stated PSNR.
 
     E-1   MSE = the mean over the covered rays of the squared difference, clipped at white and averaged over RGB,
           between the full mesh and the cut's mesh where one primary ray per screen cell meets each
-          (``sampled_error``): the face met, its corners relit under the current lights (T-7, M-1), their
-          coefficients interpolated at the hit and evaluated toward the eye, as the renderer draws a fragment
+          (``sampled_error``): the face met, its corners relit under the current lights (T-7, M-1; the cut's as
+          the frame relit them), their positions, normals and coefficients interpolated at the hit and evaluated
+          toward the eye, as the renderer draws a fragment (``kernels.runtime.hit_radiance``)
     E-2   the rays: one per square cell of about COVERAGE_RAYS cells (``screen_hits``, ``kernels.runtime.
           first_hits`` on the full mesh's BVH and on a BVH of the cut's mesh); covered: either mesh non-black there
     E-3   PSNR_est = -10 log10(MSE)                         (display units of white, as ``error_numbers``)
