@@ -12,9 +12,10 @@ drawn by ``lodprt.render.Renderer`` against the full-mesh frame of the same came
 (``lodprt.display.compare.error_against_full``: PSNR clipped at white, relative RMSE). Baseline in the same run: the full mesh
 relit along the same orbit (LOD off). Writes ``benchmarks/results/view_cut.json`` and ``view_cut.png`` (error
 against time, one panel per scene). Also, per scene, both criteria at their defaults and the screen criterion
-steered to a target PSNR, from three fixed views with the cut converged, the light on the middle sample
-(``static_views``: triangles against the full mesh, PSNR, and the target's estimated PSNR E-3 beside the measured
-one); the default also with the light halfway between two samples and at the centre of four (``between_lights``).
+steered to a target PSNR, from three fixed views, each the first frame of a fresh Runtime as ``lodprt render``
+draws it, the light on the middle sample (``static_views``: triangles against the full mesh, PSNR, the frame's
+time, and the target's estimated PSNR E-3 beside the measured one, on every pixel and on the grid); the default
+also with the light halfway between two samples and at the centre of four (``between_lights``).
 
 ``--scenes procedural`` (or ``all``, the default of the full run) also measures the static views on the procedural
 and decimated scenes of ``benchmarks/procedural.py`` (thin fins, fine relief, a crowd of sizes, terrain, a speck on
@@ -42,8 +43,6 @@ MODELS_USED = ("stanford-bunny", "spot", "fandisk")
 #: report the estimate E-3 beside the measured PSNR), the screen criterion at a fixed 0.8, T-14 at its default
 STATIC_SETTINGS = {"default": {}, "screen": {"criterion": "screen", "error_bound": 0.8},
                    "thesis": {"criterion": "thesis"}}
-#: static views: at most this many more frames of a still camera for the target's steering (E-4) to settle
-STILL_FRAMES = 64
 
 
 def bake_scene(name: str, floor: int, folder: Path, device: str) -> Path:
@@ -127,11 +126,14 @@ def between_lights(store) -> dict:
 
 
 def static_views(store, name: str, renderer, device: str, family: str = "shared") -> list[dict]:
-    """Each of STATIC_SETTINGS, cut converged, light on the middle sample, 400 x 300, from the default eye of
-    ``lodprt compare`` (``default_eye``: a three-quarter view from the front and above), a front view of the object
-    and a close one (the full frame made once per view and light): triangles against the full mesh, PSNR and, for
-    the default's rows, the estimated PSNR (E-3: how tight the estimate is, and whether it is ever optimistic). The
-    default also with the light between samples (``between_lights``: the direct path, M-1..M-6)."""
+    """Each of STATIC_SETTINGS, light on the middle sample, 400 x 300, from the default eye of ``lodprt compare``
+    (``default_eye``: a three-quarter view from the front and above), a front view of the object and a close one
+    (the full frame made once per view and light), each the first frame of a fresh Runtime, as ``lodprt render``
+    and ``compare`` draw it (the cut converged; under the default's target steered on every pixel, E-2):
+    triangles against the full mesh, PSNR, its time and, for the default's rows, the frame's estimated PSNR (E-3:
+    how tight the estimate is, and whether it is ever optimistic) on every pixel, as a still frame steers, and on
+    the grid, as a moving one does. The default also with the light between samples (``between_lights``: the
+    direct path, M-1..M-6)."""
     from lodprt.runtime.camera import Camera, default_eye, object_bounds, scene_centre
 
     b = object_bounds(store)
@@ -156,30 +158,31 @@ def light_views(store, name, renderer, device, family, views, light_name, light,
     fulls = {view: full_frame(store, cam, lights=light) for view, cam in views.items()}
     out = []
     for setting, kwargs in settings.items():
-        rt = Runtime(store, device=device, **kwargs)
-        rt.set_lights(light)
         for view, cam in views.items():
+            rt = Runtime(store, device=device, **kwargs)  # a fresh run time and its first frame: ``lodprt render``
+            rt.set_lights(light)
             rt.set_camera(cam)
-            lod = rt.update(max_passes=10_000)
-            for _ in range(STILL_FRAMES):  # a still camera: under a target, frames until the steering settles
-                if rt.steering is None or rt.steering.settled():
-                    break
-                lod = rt.update(max_passes=10_000)
-            if rt.steering is not None:  # the frame at the bound the search settled on, and its own estimate
-                lod = rt.update(max_passes=10_000)
-                rt.estimate_frame_error(lod.vertex_ids, lod.triangles, steer=False)
+            t = time.perf_counter()
+            lod = rt.update()
+            seconds = time.perf_counter() - t
+            est = grid = float("nan")
+            if rt.steering is not None:  # E-3 of the frame drawn: on every pixel (first and still frames) and on
+                rt.estimate_frame_error(lod.vertex_ids, lod.triangles, lod.coefficients, steer=False,  # the grid
+                                        every_pixel=True)  # of the frames in motion
+                est = float(rt.estimated_psnr)
+                rt.estimate_frame_error(lod.vertex_ids, lod.triangles, lod.coefficients, steer=False)
+                grid = float(rt.estimated_psnr)
             full = fulls[view]
             numbers = frame_error(renderer, lod, full, rt.white)[0]
-            est = rt.estimated_psnr  # E-3 of this frame, made only under a target_psnr
             label = rt.criterion.name + (f", target {rt.target_psnr:g} dB" if rt.target_psnr else "")
             out.append({"scene": name, "family": family, "view": view, "setting": setting, "light": light_name,
                         "criterion": f"{setting}: {label} (bound {rt.error_bound:.3g})",
                         "triangles": len(lod.triangles), "full": len(full.triangles),
                         "fewer": len(full.triangles) / max(len(lod.triangles), 1), "psnr_db": numbers["psnr_db"],
-                        "estimated_psnr_db": float("nan") if est is None else float(est)})
+                        "estimated_psnr_db": est, "grid_psnr_db": grid, "first_frame_s": seconds})
             print(f"  {view}, light {light_name}, {out[-1]['criterion']}: {out[-1]['triangles']:,} / "
-                  f"{out[-1]['full']:,} triangles, {out[-1]['psnr_db']:.1f} dB (estimated "
-                  f"{out[-1]['estimated_psnr_db']:.1f})", flush=True)
+                  f"{out[-1]['full']:,} triangles, {out[-1]['psnr_db']:.1f} dB (estimated {est:.1f}, on the grid "
+                  f"{grid:.1f}), first frame {seconds:.2f} s", flush=True)
     return out
 
 
@@ -278,7 +281,8 @@ def print_tables(rows: list[dict], static: list[dict], summary: list[dict]) -> N
     print(table(static, [("scene", "scene", "s"), ("family", "family", "s"), ("view", "view", "s"),
                          ("light", "light", "s"), ("criterion", "criterion (default)", "s"), ("triangles", "triangles", ",.0f"),
                          ("full", "full", ",.0f"), ("fewer", "x fewer", ".1f"), ("psnr_db", "PSNR dB", ".1f"),
-                         ("estimated_psnr_db", "estimated dB (E-3)", ".1f")]))
+                         ("estimated_psnr_db", "estimated dB (E-3)", ".1f"), ("grid_psnr_db", "on the grid dB", ".1f"),
+                         ("first_frame_s", "first frame s", ".2f")]))
     print()
     print("over every scene and view:")
     print(table(summary, [("criterion", "criterion", "s"), ("rows", "views", "d"),

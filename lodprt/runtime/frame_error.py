@@ -150,33 +150,67 @@ class Steering:
 
 
 def estimate(rt, vid: np.ndarray, triangles: np.ndarray, steering: Steering | None = None,
-             coefficients: np.ndarray | None = None) -> tuple[float, float | None]:
+             coefficients: np.ndarray | None = None, *, stride: int | None = None) -> tuple[float, float | None]:
     """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames from ``steering`` or None without
     one): E-1 sampled on E-2's rays (``sampled_error``: the cut's mesh, ``vid`` (A,) its vertices, ``triangles``
-    indices into them, against the full mesh, both relit under the current lights); E-4 shares it out over the
-    cut's coarse nodes in proportion to their modelled terms (culling, footprint and S-1 error from
-    ``Runtime.node_errors(detail_only=True)``, the residual from ``node_mean_square``)."""
-    face, bary, cell = screen_hits(rt)
-    sample = sampled_error(rt, vid, triangles, face, bary, coefficients)
-    cov = cell * sample.covered
+    indices into them, ``coefficients`` their relit ones when the frame has them, against the full mesh, both relit
+    under the current lights; ``stride``: the cells' side in pixels, default ``coverage_stride``, 1 on every
+    pixel); E-4 shares it out over the cut's coarse nodes in proportion to their modelled terms (culling,
+    footprint and S-1 error from ``Runtime.node_errors(detail_only=True)``, the residual from
+    ``node_mean_square``)."""
+    cam = rt.camera
+    ref = reference(rt, coverage_stride(cam.width, cam.height) if stride is None else int(stride))
+    sample = sampled_error(rt, vid, triangles, ref, coefficients)
+    cov = ref.cell * sample.covered
     est = psnr(sample.mean * cov, cov)
     if steering is None:
         return est, None
-    cam = rt.camera
     act = np.flatnonzero(rt.cut.active)
     nodes = act[act >= rt.h.num_vertices]
     ne = rt.node_errors(nodes, exact=False, detail_only=True)
     ms = node_mean_square(rt, nodes)
     area = np.clip(projected_area(rt, nodes), 1.0, float(cam.width * cam.height))  # at least the pixel it decides
-    seen = rt.faces[face[face >= 0]]  # (hits, 3) leaves of the faces the rays met first
+    seen = rt.faces[ref.face[ref.face >= 0]]  # (hits, 3) leaves of the faces the rays met first
     hidden = np.ones(rt.h.num_nodes, bool)
     hidden[rt.cut.anc[seen.ravel()]] = False
-    hidden = hidden[nodes] & (area >= 2.0 * cell)  # no ray met a node large enough to be met: hidden behind others
+    hidden = hidden[nodes] & (area >= 2.0 * ref.cell)  # no ray met a node large enough to be met: hidden behind others
     sse = np.where(ne.culled | hidden, 0.0, ms * area)
     model = float(sse.sum())
     if model > 0:  # E-4: the nodes' shares of the sampled error, in proportion to their modelled terms
         sse *= sample.mean * cov / model
     return est, steering.next_bound(rt.error_bound, est, ne.error, sse, cov)
+
+
+#: E-4: frames between two estimates of a moving frame's error while the steering searches (twice as many once
+#: it has settled)
+ESTIMATE_FRAMES = 4
+
+
+class EstimateSchedule:
+    """Which frames estimate E-1 (E-4's steering), and on which rays (E-2): the first frame steers on every pixel
+    (``Runtime.update``'s rounds); in motion every ESTIMATE_FRAMES frames on the grid (every 2 ESTIMATE_FRAMES once
+    settled; a jump of the camera or the lights forgets the bounds tried and waits for its turn); a still frame
+    (camera and lights as the last frame's: ``moved`` unset by ``set_camera``, ``set_lights``) searches afresh on
+    every pixel, one estimate a frame, until one ``confirmed`` the settled bound, and estimates no more while it
+    stays still (its estimate would not change)."""
+
+    def __init__(self):
+        self.moved, self.was_still, self.confirmed = True, False, False
+
+    def begin(self, frame: int, settle: bool, jumped: bool, steering: "Steering | None") -> tuple[bool, bool]:
+        """(whether frame number ``frame`` estimates, whether it is still); resets ``steering`` on the first
+        frame (``settle``), a jump, and the first still frame after a move (unless the first frame's every-pixel
+        search confirmed its bound and nothing has moved since)."""
+        still = not self.moved and not settle
+        if self.moved or settle:
+            self.confirmed = False
+        if steering is not None and (settle or jumped or (still and not self.was_still and not self.confirmed)):
+            steering.reset()  # the grid's bracket is not the every-pixel one
+        self.moved, self.was_still = False, still
+        if still:
+            return not self.confirmed, True
+        every = ESTIMATE_FRAMES * (2 if steering is not None and steering.settled() else 1)
+        return settle or frame % every == 0, False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -188,37 +222,69 @@ class SampledError:
     covered: int
 
 
-def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, face: np.ndarray, bary: np.ndarray,
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """E-1's full-mesh side for one camera, lights and grid (``reference``): per ray of E-2's grid of ``stride``
+    pixel cells (``cell`` pixels each), the first face of the full mesh it meets (``face``, -1: none), where on it
+    (``bary``) and what the renderer draws there (``drawn`` (R, 3) radiance, 0 where it meets none)."""
+
+    stride: int
+    face: np.ndarray
+    bary: np.ndarray
+    drawn: np.ndarray
+    cell: float
+
+
+#: the last ``Reference`` made for each Runtime, with its key: the first frame's steering rounds and a still
+#: camera's frames estimate cut after cut against the same full mesh, camera and lights
+_REFERENCE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def reference(rt, stride: int) -> Reference:
+    """E-1's full-mesh side on the grid of ``stride`` pixel cells for the Runtime ``rt``'s camera and lights: the
+    rays' first faces (``screen_hits``), their corners relit (``Runtime.relit``) and drawn as fragments
+    (``hit_radiance``); made again only when the grid, the camera or the lights changed."""
+    key = (int(stride), rt.camera, np.asarray(rt.light_positions, np.float64).tobytes(),
+           np.asarray(rt.light_colors, np.float64).tobytes())
+    held = _REFERENCE.get(rt)
+    if held is not None and held[0] == key:
+        return held[1]
+    face, bary, cell = screen_hits(rt, stride=stride)
+    hit = face >= 0
+    ids, inverse = np.unique(rt.faces[face[hit]], return_inverse=True)
+    rows = np.full((len(face), 3), -1, np.int32)
+    rows[hit] = inverse.reshape(-1, 3)
+    coef = rt.relit(ids)[0] if len(ids) else np.zeros((0, 3, 1), np.float32)
+    ref = Reference(int(stride), face, bary, hit_radiance(rt, rows, bary, ids, coef), cell)
+    _REFERENCE[rt] = (key, ref)
+    return ref
+
+
+def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference,
                   coefficients: np.ndarray | None = None) -> SampledError:
-    """E-1: per ray of E-2's grid (``face``, ``bary``: its first face of the full mesh and where on it), the full
-    mesh's radiance there against the cut's (the same ray through the cut's mesh: ``vid`` (A,) its vertices,
-    ``triangles`` (M, 3) indices into them, ``coefficients`` (A, 3, ncoef) their relit ones if the frame has them),
-    each as the renderer draws a fragment: the face's corners relit under the current lights (``Runtime.relit``,
-    T-7 with M-1), their positions, normals and coefficients interpolated at the hit and evaluated toward the eye
+    """E-1: per ray of E-2's grid, the full mesh's radiance there (``ref``: ``reference``) against the cut's (the
+    same ray through the cut's mesh: ``vid`` (A,) its vertices, ``triangles`` (M, 3) indices into them,
+    ``coefficients`` (A, 3, ncoef) their relit ones if the frame has them, else the corners the rays meet are
+    relit here), each as the renderer draws a fragment: the face's corners relit under the current lights (T-7
+    with M-1), their positions, normals and coefficients interpolated at the hit and evaluated toward the eye
     (``kernels.runtime.hit_radiance``); clipped at white, the squared difference averaged over RGB, over the rays
     where either is non-black (what ``lodprt.display.error_figure.error_numbers`` averages over the pixels)."""
     vid = np.asarray(vid, np.int64)
-    R = len(face)
-    cface, cbary = np.full(R, -1, np.int32), np.zeros((R, 3), np.float32)
+    drawn = np.zeros_like(ref.drawn)
     if len(triangles):
-        cface, cbary = screen_hits(rt, cut_bvh(rt, vid, triangles))[:2]
-    hit, chit = face >= 0, cface >= 0
-    cut_corners = np.asarray(triangles, np.int64)[cface[chit]]  # (hits, 3) rows of vid
-    if coefficients is None:  # relight the cut's corners with the full mesh's
-        corners = np.concatenate([rt.faces[face[hit]], vid[cut_corners]])
-        ids, inverse = np.unique(corners, return_inverse=True)
-        rows = inverse.reshape(-1, 3)
-        coef = rt.relit(ids)[0] if len(ids) else np.zeros((0, 3, 1), np.float32)
-    else:  # the cut's rows as the frame relit them, after the full mesh's corners
-        ids, inverse = np.unique(rt.faces[face[hit]], return_inverse=True)
-        rows = np.concatenate([inverse.reshape(-1, 3), cut_corners + len(ids)])
-        ids = np.concatenate([ids, vid])
-        coef = rt.relit(ids[: len(ids) - len(vid)])[0] if len(ids) > len(vid) else None
-        coef = np.asarray(coefficients) if coef is None else np.concatenate([coef, coefficients])
-    corner_rows = np.full((2 * R, 3), -1, np.int32)  # rays 0..R-1 through the full mesh, R..2R-1 through the cut
-    corner_rows[np.concatenate([hit, chit])] = rows
-    drawn = hit_radiance(rt, corner_rows, np.concatenate([bary, cbary]), ids, coef)
-    return SampledError(*clipped_mse(drawn[R:], drawn[:R], rt.white))
+        cface, cbary = screen_hits(rt, cut_bvh(rt, vid, triangles), stride=ref.stride)[:2]
+        chit = cface >= 0
+        corners = np.asarray(triangles, np.int64)[cface[chit]]  # (hits, 3) rows of vid
+        rows = np.full((len(cface), 3), -1, np.int32)
+        if coefficients is None:  # relight the corners the rays meet
+            ids, inverse = np.unique(vid[corners], return_inverse=True)
+            rows[chit] = inverse.reshape(-1, 3)
+            coef = rt.relit(ids)[0] if len(ids) else np.zeros((0, 3, 1), np.float32)
+        else:  # the cut's rows as the frame relit them
+            ids, coef = vid, np.asarray(coefficients)
+            rows[chit] = corners
+        drawn = hit_radiance(rt, rows, cbary, ids, coef)
+    return SampledError(*clipped_mse(drawn, ref.drawn, rt.white))
 
 
 def clipped_mse(a: np.ndarray, b: np.ndarray, white: float) -> tuple[float, int]:
@@ -276,17 +342,17 @@ def coverage_stride(width: int, height: int) -> int:
     return max(1, int(math.sqrt(width * height / COVERAGE_RAYS)))
 
 
-def screen_hits(rt, mesh=None) -> tuple[np.ndarray, np.ndarray, float]:
+def screen_hits(rt, mesh=None, stride: int | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """E-1, E-2's rays: the first face of ``mesh`` (default the store's full mesh: ``Runtime.scene_bvh``, face ids
-    as in ``faces``; -1: none) that a primary ray through the centre of each ``coverage_stride`` square cell of the
-    screen meets, the hit's barycentric weights of that face's corners (``kernels.runtime.first_hits``), and the
-    pixels one cell stands for."""
+    as in ``faces``; -1: none) that a primary ray through the centre of each square cell of ``stride`` pixels
+    (default ``coverage_stride``; 1: every pixel's centre) of the screen meets, the hit's barycentric weights of
+    that face's corners (``kernels.runtime.first_hits``), and the pixels one cell stands for."""
     import warp as wp
 
     from lodprt.kernels import runtime as kr
 
     cam = rt.camera
-    stride = coverage_stride(cam.width, cam.height)
+    stride = coverage_stride(cam.width, cam.height) if stride is None else max(1, int(stride))
     cols, rows = max(1, -(-cam.width // stride)), max(1, -(-cam.height // stride))
     inv = np.linalg.inv(np.asarray(rt.vp, np.float64))
     eye = np.asarray(cam.eye, np.float64)

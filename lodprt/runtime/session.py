@@ -51,9 +51,6 @@ FIRST_ROUNDS = 12
 #: M-6: rounds of the first frame that refine along the actual light's shadow edges (each relights the cut and
 #: splits the nodes whose triangles straddle an edge by more than the bound)
 EDGE_ROUNDS = 24
-#: E-4: frames between two estimates of the frame's error while the steering searches (twice as many once it
-#: has settled)
-ESTIMATE_FRAMES = 4
 #: E-4: the relative change of the bound below which the steering keeps it
 STEER_STEP = 0.1
 
@@ -120,7 +117,9 @@ class Runtime:
         if self.criterion.steered() and triangle_budget is not None:
             raise LodprtError("target_psnr steers the screen criterion's bound: not with a triangle_budget")
         self.estimated_psnr = None  # E-3 of the last estimate (target_psnr set)
+        self.estimate_stride = None  # the last estimate's cells, in pixels (1: every pixel; E-2)
         self.view_jumped = False  # the camera jumped since the last frame (set_camera)
+        self.schedule = frame_error.EstimateSchedule()  # which frames estimate E-1, on the grid or every pixel
         #: E-4: the search for the largest bound whose frame meets target_psnr (None without a target)
         self.steering = frame_error.Steering(self.criterion.target_psnr, STEER_STEP) if self.criterion.steered() \
             else None
@@ -183,8 +182,7 @@ class Runtime:
 
     @property
     def box_centre(self) -> np.ndarray:
-        """T-14 coefficient box centres (N - V, slots, C, ncoef) float16 (``node_bounds.coefficient_boxes``), one
-        slot per completed sample (``used_slots``)."""
+        """T-14 coefficient box centres (N - V, slots, C, ncoef) float16 (``node_bounds.coefficient_boxes``)."""
         return self._node_bounds("box_centre")
 
     @property
@@ -198,8 +196,7 @@ class Runtime:
         return self._node_bounds("detail")
 
     def _node_bounds(self, name: str) -> np.ndarray:
-        """One of the per-node bounds, per sample slot, made for every completed sample from the first time it is
-        asked for on: the screen criterion's frames need only ``detail``, T-14's only the boxes."""
+        """One of the per-node bounds, per sample slot, made for every completed sample once first asked for."""
         h, cache = self.h, self.samples
         key = "detail" if name == "detail" else "boxes"
         if key not in cache.derived:
@@ -230,9 +227,8 @@ class Runtime:
         self._synced = self.samples.version
 
     def _kernel_bounds(self, exact: bool) -> list:
-        """The view_errors kernel's box_centre, box_half and detail arrays: the ones its criterion reads (and the
-        boxes too when ``exact``, which evaluates every term); a one-row placeholder of the same width for the
-        others, which the kernel then never indexes."""
+        """The view_errors kernel's box_centre, box_half and detail arrays: the ones its criterion reads (the boxes
+        too when ``exact``, which evaluates every term); a one-row placeholder, never indexed, for the others."""
         need = set(self.criterion.NODE_BOUNDS)
         if exact:
             need |= {"box_centre", "box_half"}
@@ -269,8 +265,7 @@ class Runtime:
 
     def launch_rows(self, kernel, rows: int, inputs: list, outputs: list) -> None:
         """Launch ``kernel`` over ``rows`` rows, each launch taking its first row as ``offset``: on the CPU in slices
-        over the cores (``lodprt.launches.KernelThreads``: Warp runs a CPU launch on one thread and releases the
-        GIL), one launch on a GPU."""
+        over the cores (``lodprt.launches.KernelThreads``), one launch on a GPU."""
         wp, dev = self._wp, self.device
 
         def run(a: int, b: int) -> None:
@@ -333,6 +328,9 @@ class Runtime:
         self.refinement.dirty = True
         if old is None or old.shape != W.shape or np.abs(W - old).sum() > LIGHT_JUMP * max(np.abs(old).sum(), 1e-30):
             self.errors.refresh_all = True
+        if self.camera is None or not (np.array_equal(lit.positions, self.light_positions)
+                                       and np.array_equal(lit.colors, self.light_colors)):
+            self.schedule.moved = True
         self.light_positions, self.light_colors, self.lights_clamped = lit.positions, lit.colors, lit.clamped
         self.sample_weights, self.used_samples, self.used_slots = W, lit.used_samples, lit.used_slots
 
@@ -345,6 +343,7 @@ class Runtime:
         self.camera = self.lighting.watch_eye(camera_for(camera, eye=eye, target=target, default_target=self._centre,
                                                          up=up, fov=fov, width=width, height=height, near=near, far=far))
         self.refinement.dirty = True
+        self.schedule.moved = self.schedule.moved or self.camera != old
         if old is None or camera_jump(old, self.camera, JUMP):
             self.errors.refresh_all = self.view_jumped = True
         self.vp = view_projection(self.camera, self.bounds)
@@ -412,14 +411,16 @@ class Runtime:
         return vid, np.take(lut, self._tri.faces(self.cut.anc))
 
     def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, coefficients: np.ndarray | None = None, *,
-                             steer: bool = True) -> None:
+                             steer: bool = True, every_pixel: bool = False) -> None:
         """E-1..E-3 of the current cut (``estimated_psnr``; ``vid``, ``tri``: its mesh as ``_cut_mesh`` gives it,
-        ``coefficients``: its relit (A, 3, ncoef) ones when the frame has them, else relit here) and, with a
-        target_psnr and ``steer``, E-4: the bound for the next frames from the steering's search
-        (``frame_error.Steering``, settled within STEER_STEP; the cached errors stay: a node cached under the old
-        bound is evaluated again when due)."""
+        ``coefficients``: its relit (A, 3, ncoef) ones when the frame has them, else relit here; on E-2's grid, or
+        with ``every_pixel`` one ray per pixel) and, with a target_psnr and ``steer``, E-4: the bound for the next
+        frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the cached errors
+        stay: a node cached under the old bound is evaluated again when due)."""
+        self.estimate_stride = 1 if every_pixel else frame_error.coverage_stride(self.camera.width,
+                                                                                 self.camera.height)
         self.estimated_psnr, new = frame_error.estimate(self, vid, tri, self.steering if steer else None,
-                                                        coefficients)
+                                                        coefficients, stride=self.estimate_stride)
         if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
 
@@ -454,18 +455,14 @@ class Runtime:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
         t0 = time.perf_counter()
         self.errors.frame += 1
-        # E-4: the first frame steers until it meets the target; a camera jump forgets the bounds tried so far; the
-        # estimates follow every ESTIMATE_FRAMES frames (a jump of the camera or the lights waits for its turn)
-        settle, jumped = not self.refinement.converged_once, self.view_jumped
+        # E-4: the first frame steers until it meets the target, on every pixel; then ``EstimateSchedule``
+        settle = not self.refinement.converged_once
+        due, still = self.schedule.begin(self.errors.frame, settle, self.view_jumped, self.steering)
         self.view_jumped = False
-        if (settle or jumped) and self.steering is not None:
-            self.steering.reset()
         refined, coarsened, touched, passes = self._converge(max_passes)
         t1 = time.perf_counter()
         vid, tri = self._cut_mesh()
         t2 = time.perf_counter()
-        every = ESTIMATE_FRAMES * (2 if self.steering is not None and self.steering.settled() else 1)
-        due = settle or self.errors.frame % every == 0  # E-4 every few frames, half as often once settled
         counts = (refined, coarsened, touched, passes)
         coef = rad = None
         estimating = self.lod and self.target_psnr is not None and due  # E-4: steer the bound
@@ -473,18 +470,27 @@ class Runtime:
             for _ in range(FIRST_ROUNDS):
                 # M-6 first: each round's estimate sees the cut the frame draws at that bound
                 vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts)
-                self.estimate_frame_error(vid, tri, coef)
+                self.estimate_frame_error(vid, tri, coef, every_pixel=True)
                 if not self.refinement.dirty:
                     break
                 counts = tuple(a + b for a, b in zip(counts, self._converge(10_000)))
                 vid, tri = self._cut_mesh()
                 coef = None
+            else:  # out of rounds on a bound not estimated: the largest bound that met, when one did
+                met = self.steering.meets
+                if met is not None and met != self.error_bound:
+                    self.error_bound, self.refinement.dirty = met, True
+                    counts = tuple(a + b for a, b in zip(counts, self._converge(10_000)))
+                    vid, tri = self._cut_mesh()
+                    self.estimate_frame_error(vid, tri, every_pixel=True, steer=False)  # E-3 of the cut drawn
+            self.schedule.confirmed = self.steering.settled()
         steer = time.perf_counter() - t2  # the estimate and steering count as cut work
         if coef is None:
             coef, rad = self._relight(vid)
         t3 = time.perf_counter()
         if estimating and not settle:  # from this frame's relit cut; the bound moves for the next frames
-            self.estimate_frame_error(vid, tri, coef)
+            self.estimate_frame_error(vid, tri, coef, every_pixel=still)
+            self.schedule.confirmed = still and self.steering.settled() and not self.refinement.dirty
         if settle:  # M-6: the first frame follows the light's shadow edges
             vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts, (coef, rad))
         else:
@@ -508,6 +514,7 @@ class Runtime:
             "lights_clamped": int(self.lights_clamped),
             "shadow_rays": int(self.lighting.rays),  # M-3: rays cast toward the lights
             "estimated_psnr_db": self.estimated_psnr,  # E-3 (None without a target_psnr)
+            "estimate_stride_px": self.estimate_stride,  # its cells (1: every pixel, the first and still frames)
             "ms_cut": 1e3 * (t1 - t0 + steer),
             "ms_triangulate": 1e3 * (t2 - t1),
             "ms_relight": 1e3 * (t3 - t2 - steer),
