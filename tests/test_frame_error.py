@@ -17,6 +17,14 @@ def bunny_store(bunny_bake):
     return open_store(bunny_bake)
 
 
+def covered(rt, frame) -> int:
+    """The pixels ``frame`` (or the full mesh's frame) covers non-black, as the renderer draws them."""
+    from lodprt.display.render import Renderer
+
+    with Renderer() as r:
+        return int((r.image(frame, linear=True).max(-1) > 0).sum())
+
+
 def measured(rt, frame):
     """PSNR of ``frame`` against the full mesh under the same camera and lights, drawn by the renderer."""
     from lodprt.display.compare import frame_error
@@ -63,8 +71,10 @@ def test_target_psnr_is_met(bunny_store):
         rt.set_lights(bunny_store.light_positions[4:5])
         rt.set_camera(cam)
         frame = rt.update()
-        assert rt.estimated_psnr >= target - 0.5, (target, rt.estimated_psnr)
-        assert measured(rt, frame) >= target - 0.5
+        assert rt.estimated_psnr >= target, (target, rt.estimated_psnr)
+        # the measured MSE within two pixels of a full-white difference of the target's (where a ray through a
+        # pixel's centre and the rasteriser disagree at a silhouette)
+        assert 10 ** (-measured(rt, frame) / 10) <= 10 ** (-target / 10) + 2 / covered(rt, frame)
         assert frame.stats["estimated_psnr_db"] == rt.estimated_psnr and frame.stats["estimate_stride_px"] == 1
         tris[target] = len(frame.triangles)
     assert tris[30.0] < tris[38.0]
@@ -98,15 +108,16 @@ def test_sampled_error_on_every_pixel_is_the_measured_error(bunny_store, bound, 
 
 
 def test_estimate_schedule():
-    """E-4's schedule: the first frame estimates; a still frame after it estimates on every pixel until an estimate
-    confirms the settled bound, then no more, and keeps the bracket the first frame confirmed; frames in motion
-    estimate every ESTIMATE_FRAMES frames (on the grid); the first still frame after a move forgets the bracket."""
+    """The estimates' schedule: the first frame estimates; a still frame after it does not (the first frame's
+    pins hold); frames in motion estimate every ESTIMATE_FRAMES frames (on the grid), a bracket kept but for a
+    jump; the first still frame after a move estimates once more (E-5 on every pixel), then none."""
     from lodprt.runtime.frame_error import ESTIMATE_FRAMES, EstimateSchedule, Steering
 
     s, st = EstimateSchedule(), Steering(36.0)
     assert s.begin(1, True, False, st) == (True, False)
-    st.meets, s.confirmed = 1.0, True  # the first frame's search settled and confirmed its bound
-    assert s.begin(2, False, False, st) == (False, True) and st.meets == 1.0
+    s.confirmed = True  # the first frame's pin rounds ran
+    assert s.begin(2, False, False, st) == (False, True)
+    st.meets = 1.0
     moving = []
     for frame in range(3, 3 + 2 * ESTIMATE_FRAMES):
         s.moved = True
@@ -114,45 +125,104 @@ def test_estimate_schedule():
         assert not still and not s.confirmed
         moving.append(due)
     assert sum(moving) == 2 and st.meets == 1.0  # a bracket kept in motion (no jump)
-    assert s.begin(20, False, False, st) == (True, True) and st.meets is None  # still again: searched afresh
-    assert s.begin(21, False, False, st) == (True, True)
+    assert s.begin(20, False, False, st) == (True, True)  # stopped: E-5 once
     s.confirmed = True
-    assert s.begin(22, False, False, st) == (False, True)
-    s.begin(23, False, True, st)  # a jump forgets the bracket
+    assert s.begin(21, False, False, st) == (False, True)
+    s.moved = True
+    s.begin(22, False, True, st)  # a jump forgets the bracket
     assert st.meets is None
 
 
-def test_still_frames_steer_on_every_pixel(bunny_store, monkeypatch):
-    """``Runtime.update``: the first frame's estimates are on every pixel; a still camera estimates no more once
-    the search has settled; a moving camera estimates on E-2's grid every few frames; when it stops, on every
-    pixel again."""
+def test_still_frames_refine_where_the_error_is(bunny_store, monkeypatch):
+    """``Runtime.update``: the first frame measures its error on every pixel and pins nodes from the coarsest
+    bound until it meets the target (E-5); a still camera estimates no more; a moving one returns to E-4's bound,
+    drops the pins and estimates on E-2's grid every few frames; when it stops, E-5 on every pixel again."""
     from lodprt.runtime import frame_error
     from lodprt.runtime.camera import Camera, default_eye, scene_centre
     from lodprt.runtime.session import Runtime
 
-    strides = []
-    real = frame_error.estimate
-    monkeypatch.setattr(frame_error, "estimate", lambda *a, **k: strides.append(k["stride"]) or real(*a, **k))
+    calls = []
+    real_estimate, real_pin = frame_error.estimate, frame_error.pin
+    monkeypatch.setattr(frame_error, "estimate", lambda *a, **k: calls.append(k["stride"]) or real_estimate(*a, **k))
+    monkeypatch.setattr(frame_error, "pin", lambda *a, **k: calls.append("pin") or real_pin(*a, **k))
     rt = Runtime(bunny_store, device="cpu")
+    start = rt.error_bound  # E-4's starting bound, kept aside while the frame is pinned
     rt.set_lights(bunny_store.light_positions[4:5])
     c, e = np.array(scene_centre(bunny_store)), np.array(default_eye(bunny_store))
     cam = lambda k: Camera(eye=tuple(c + (e - c) * (1 - 0.01 * k)), target=tuple(c), width=640, height=480)  # noqa
     rt.set_camera(cam(0))
-    rt.update()
-    assert strides and set(strides) == {1}
-    for _ in range(6):  # still: steered on every pixel until settled, then no estimate
-        strides.clear()
-        rt.update()
-    assert strides == [] and rt.steering.settled()
+    first = rt.update()
+    assert calls and set(calls) <= {"pin", 1} and "pin" in calls
+    assert first.stats["pinned_nodes"] > 0 and first.stats["estimate_stride_px"] == 1
+    assert rt.estimated_psnr >= rt.target_psnr and rt.error_bound == frame_error.BOUND_RANGE[1]
+    calls.clear()
+    for _ in range(3):  # still: no estimate, the same cut
+        frame = rt.update()
+    assert calls == [] and len(frame.triangles) == len(first.triangles)
     grid = frame_error.coverage_stride(640, 480)
     assert grid > 1
     for k in range(1, 1 + 2 * frame_error.ESTIMATE_FRAMES):
         rt.set_camera(cam(k))
-        rt.update()
-    assert strides and set(strides) == {grid}
-    strides.clear()
-    rt.update()  # stopped
-    assert strides == [1]
+        frame = rt.update()
+    assert calls and set(calls) == {grid} and frame.stats["pinned_nodes"] == 0
+    assert rt.motion_bound is None and start <= rt.error_bound < frame_error.BOUND_RANGE[1] or rt.error_bound < start
+    calls.clear()
+    assert rt.update().stats["pinned_nodes"] > 0  # stopped
+    assert calls[0] == "pin" and set(calls) <= {"pin", 1}
+
+
+def test_a_pinned_node_stays_split_even_culled(bunny_store):
+    """E-5: a pinned node splits even when T-13 culls it (its pixels were seen) and is not collapsed again for
+    being culled: the cut settles in a few passes instead of flipping it back and forth."""
+    from lodprt.runtime.camera import Camera, default_eye, scene_centre
+    from lodprt.runtime.session import Runtime
+
+    rt = Runtime(bunny_store, device="cpu", error_bound=0.8)  # a fixed bound: no pins of its own
+    rt.set_lights(bunny_store.light_positions[4:5])
+    rt.set_camera(Camera(eye=default_eye(bunny_store), target=scene_centre(bunny_store), width=320, height=240))
+    rt.update()
+    act = np.flatnonzero(rt.cut.active)
+    internal = act[act >= rt.h.num_vertices]
+    culled = internal[rt.node_errors(internal).culled]
+    assert len(culled)
+    rt.refinement.pin(culled[:5])
+    frame = rt.update(max_passes=10_000)
+    assert not rt.cut.active[culled[:5]].any() and frame.stats["passes"] < 50
+    again = rt.update(max_passes=10_000)
+    assert again.stats["passes"] < 50 and not rt.cut.active[culled[:5]].any()
+
+
+def test_pins_cover_the_excess():
+    """E-5's choice on a hand-made frame: each ray's error is shared half by the cut's face's coarse corners and
+    half by the full mesh's, and the nodes with the largest shares are taken until they cover the excess over the
+    budget; none when the frame meets it."""
+    from types import SimpleNamespace
+
+    from lodprt.runtime.frame_error import Reference, pinned_nodes
+
+    V = 6  # leaves 0..5; nodes 6, 7, 8 coarse
+    anc = np.array([6, 6, 7, 7, 8, 5])
+    rt = SimpleNamespace(h=SimpleNamespace(num_nodes=9, num_vertices=V), cut=SimpleNamespace(anc=anc),
+                         faces=np.array([[0, 2, 4], [1, 3, 5], [5, 5, 5]]),
+                         refinement=SimpleNamespace(pinned=np.zeros(9, bool)))
+    vid = np.arange(V)
+    triangles = np.array([[0, 2, 5], [4, 5, 5]])  # cut faces: coarse corners {6, 7} and {8}
+    ref = Reference(1, np.array([0, 2, -1, 1]), np.zeros((4, 3)), np.zeros((4, 3)), 1.0)
+    cface = np.array([0, 1, 1, -1])
+    d2 = np.array([0.4, 0.2, 0.1, 0.3])
+    # shares: ray 0: cut {6,7} 0.1 each, full face 0 {6,7,8} 0.2/3 each; ray 1: cut {8} 0.1, full face 2 (all leaf 5)
+    # nothing; ray 2: cut {8} 0.05; ray 3: full face 1 {6,7} 0.075 each
+    err = {6: 0.1 + 0.4 / 6 + 0.075, 7: 0.1 + 0.4 / 6 + 0.075, 8: 0.4 / 6 + 0.1 + 0.05}
+    total = d2.sum()
+    assert len(pinned_nodes(rt, vid, triangles, ref, d2, cface, total)) == 0
+    got = pinned_nodes(rt, vid, triangles, ref, d2, cface, total - 0.2)
+    assert list(got) == [6]  # 6 and 7 tie (the stable order takes 6): one covers 0.2 of the excess
+    got = pinned_nodes(rt, vid, triangles, ref, d2, cface, total - err[6] - 0.01)
+    assert sorted(got) == [6, 7]
+    # unattributed: ray 1's full side (leaves only), ray 2's full side and ray 3's cut side (they met nothing)
+    assert abs(sum(err.values()) - (total - 0.1 - 0.05 - 0.15)) < 1e-12
+    rt.refinement.pinned[6] = True  # pinned already (and still active: it could not split): the next ones
+    assert list(pinned_nodes(rt, vid, triangles, ref, d2, cface, total - 0.2)) == [7]
 
 
 def test_bad_target_is_a_clear_error(bunny_store):

@@ -1,14 +1,15 @@
-"""The view cut's error for the whole frame (docs/RUNTIME.md "An error target for the frame"; E-1..E-4): the
-frame's mean squared error against the full mesh, sampled on a grid of primary rays, and the steering of the
-per-node bound toward a stated PSNR.
+"""The view cut's error for the whole frame (docs/RUNTIME.md "An error target for the frame"; E-1..E-5): the
+frame's mean squared error against the full mesh, on every pixel or a grid of primary rays, the steering of the
+per-node bound toward a stated PSNR in motion, and the refinement of a still frame where its error is.
 
     E-1   MSE = the mean over the covered rays of the squared difference, clipped at white and averaged over RGB,
           between the full mesh and the cut's mesh where one primary ray per screen cell meets each
           (``sampled_error``): the face met, its corners relit under the current lights (T-7, M-1; the cut's as
           the frame relit them), their positions, normals and coefficients interpolated at the hit and evaluated
           toward the eye, as the renderer draws a fragment (``kernels.runtime.hit_radiance``)
-    E-2   the rays: one per square cell of about COVERAGE_RAYS cells (``screen_hits``, ``kernels.runtime.
-          first_hits`` on the full mesh's BVH and on a BVH of the cut's mesh); covered: either mesh non-black there
+    E-2   the rays: one per pixel (the first frame, a still one) or per square cell of about COVERAGE_RAYS cells
+          (in motion) (``screen_hits``, ``kernels.runtime.first_hits`` on the full mesh's BVH, ``reference``, and
+          on a BVH of the cut's mesh); covered: either mesh non-black there
     E-3   PSNR_est = -10 log10(MSE)                         (display units of white, as ``error_numbers``)
     E-4   the bound b for the next frames: the largest bound whose cut's E-3 meets the target, searched by
           bisection in log b between the largest bound that met it and the smallest that missed (``Steering``);
@@ -17,6 +18,9 @@ per-node bound toward a stated PSNR.
           proportion to a model of their terms: the mean over each node's leaves of the squared T-15 residual of
           its subtree's collapses times its projected area; the rest are refined), or, under SLACK of the budget,
           b raised by sqrt(budget / SSE) (at least RAISE); never by more than MAX_STEP at once
+    E-5   a still frame (``pin``): from the coarsest bound, split the coarse nodes carrying the most of E-1 on
+          every pixel (each ray's share: half to the coarse corners of the face it meets in the cut, half to
+          those in the full mesh) until they cover the excess over 10^(-PSNR / 10) N; measure again; repeat
 
 E-1 measures the frame's own error the way ``lodprt.display.compare`` measures it, on a sample of its pixels:
 shading (the cut's coarse triangles interpolate what the full mesh's fine ones resolve), shadow edges, highlights
@@ -187,26 +191,25 @@ ESTIMATE_FRAMES = 4
 
 
 class EstimateSchedule:
-    """Which frames estimate E-1 (E-4's steering), and on which rays (E-2): the first frame steers on every pixel
-    (``Runtime.update``'s rounds); in motion every ESTIMATE_FRAMES frames on the grid (every 2 ESTIMATE_FRAMES once
-    settled; a jump of the camera or the lights forgets the bounds tried and waits for its turn); a still frame
-    (camera and lights as the last frame's: ``moved`` unset by ``set_camera``, ``set_lights``) searches afresh on
-    every pixel, one estimate a frame, until one ``confirmed`` the settled bound, and estimates no more while it
-    stays still (its estimate would not change)."""
+    """Which frames estimate E-1, and how: the first frame refines where its error is on every pixel (E-5,
+    ``Runtime.update``'s pin rounds); in motion, E-4's steering every ESTIMATE_FRAMES frames on E-2's grid (every
+    2 ESTIMATE_FRAMES once settled; a jump of the camera or the lights forgets the bounds tried and waits for its
+    turn); the first still frame (camera and lights as the last frame's: ``moved`` unset by ``set_camera``,
+    ``set_lights``) runs E-5 once more (``confirmed``), and no estimate follows while it stays still (it would not
+    change)."""
 
     def __init__(self):
-        self.moved, self.was_still, self.confirmed = True, False, False
+        self.moved, self.confirmed = True, False
 
     def begin(self, frame: int, settle: bool, jumped: bool, steering: "Steering | None") -> tuple[bool, bool]:
         """(whether frame number ``frame`` estimates, whether it is still); resets ``steering`` on the first
-        frame (``settle``), a jump, and the first still frame after a move (unless the first frame's every-pixel
-        search confirmed its bound and nothing has moved since)."""
+        frame (``settle``) and a jump."""
         still = not self.moved and not settle
         if self.moved or settle:
             self.confirmed = False
-        if steering is not None and (settle or jumped or (still and not self.was_still and not self.confirmed)):
-            steering.reset()  # the grid's bracket is not the every-pixel one
-        self.moved, self.was_still = False, still
+        if steering is not None and (settle or jumped):
+            steering.reset()
+        self.moved = False
         if still:
             return not self.confirmed, True
         every = ESTIMATE_FRAMES * (2 if steering is not None and steering.settled() else 1)
@@ -262,15 +265,26 @@ def reference(rt, stride: int) -> Reference:
 
 def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference,
                   coefficients: np.ndarray | None = None) -> SampledError:
-    """E-1: per ray of E-2's grid, the full mesh's radiance there (``ref``: ``reference``) against the cut's (the
+    """E-1 over E-2's rays (``ray_errors``): the mean squared difference over the covered rays."""
+    d2, covered = ray_errors(rt, vid, triangles, ref, coefficients)[:2]
+    n = int(covered.sum())
+    return SampledError(float(d2.sum()) / n if n else 0.0, n)
+
+
+def ray_errors(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference,
+               coefficients: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """E-1 per ray of E-2's grid: the full mesh's radiance there (``ref``: ``reference``) against the cut's (the
     same ray through the cut's mesh: ``vid`` (A,) its vertices, ``triangles`` (M, 3) indices into them,
     ``coefficients`` (A, 3, ncoef) their relit ones if the frame has them, else the corners the rays meet are
     relit here), each as the renderer draws a fragment: the face's corners relit under the current lights (T-7
     with M-1), their positions, normals and coefficients interpolated at the hit and evaluated toward the eye
-    (``kernels.runtime.hit_radiance``); clipped at white, the squared difference averaged over RGB, over the rays
-    where either is non-black (what ``lodprt.display.error_figure.error_numbers`` averages over the pixels)."""
+    (``kernels.runtime.hit_radiance``). Returns (R,) the squared difference, both clipped at white, averaged over
+    RGB, in units of white squared (0 where neither is non-black), (R,) covered: either non-black (what
+    ``lodprt.display.error_figure.error_numbers`` averages over the pixels), and (R,) the row of ``triangles``
+    each ray met (-1: none)."""
     vid = np.asarray(vid, np.int64)
     drawn = np.zeros_like(ref.drawn)
+    cface = np.full(len(ref.face), -1, np.int32)
     if len(triangles):
         cface, cbary = screen_hits(rt, cut_bvh(rt, vid, triangles), stride=ref.stride)[:2]
         chit = cface >= 0
@@ -284,19 +298,61 @@ def sampled_error(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference,
             ids, coef = vid, np.asarray(coefficients)
             rows[chit] = corners
         drawn = hit_radiance(rt, rows, cbary, ids, coef)
-    return SampledError(*clipped_mse(drawn, ref.drawn, rt.white))
+    d2, covered = clipped_squares(drawn, ref.drawn, rt.white)
+    return d2, covered, cface
+
+
+def pin(rt, vid: np.ndarray, triangles: np.ndarray, coefficients: np.ndarray | None) -> tuple[float, np.ndarray]:
+    """E-3 of the Runtime ``rt``'s current cut on every pixel (``ray_errors``) and E-5's nodes to split so that it
+    meets ``rt.target_psnr`` (``pinned_nodes``; empty when it meets it)."""
+    ref = reference(rt, 1)
+    d2, covered, cface = ray_errors(rt, vid, triangles, ref, coefficients)
+    n = float(covered.sum()) * ref.cell
+    budget = 10.0 ** (-rt.target_psnr / 10.0) * n
+    return psnr(float(d2.sum()) * ref.cell, n), pinned_nodes(rt, vid, triangles, ref, d2, cface, budget)
+
+
+def pinned_nodes(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference, d2: np.ndarray, cface: np.ndarray,
+                 budget: float) -> np.ndarray:
+    """E-5: the coarse nodes of the current cut to split so that the frame meets its budget of squared error
+    (``budget``: ``10^(-P / 10)`` times the covered pixels): each ray's squared difference ``d2`` (``ray_errors``,
+    on every pixel) goes half to the cut's side and half to the full mesh's, each half shared equally by the
+    coarse active nodes (``Runtime.cut.anc`` of the corners) of the face the ray met in that mesh (``cface`` in
+    the cut's ``triangles`` over ``vid``; ``ref.face`` in the full mesh); the nodes with the largest shares,
+    largest first, until their sum covers the excess over the budget. Empty when the frame meets it."""
+    excess = float(d2.sum()) * ref.cell - budget
+    if excess <= 0:
+        return np.zeros(0, np.int64)
+    h, anc = rt.h, rt.cut.anc
+    err = np.zeros(h.num_nodes)
+    tri = np.asarray(triangles, np.int64)
+    for hit, corners in ((cface >= 0, lambda m: np.asarray(vid, np.int64)[tri[cface[m]]]),
+                         (ref.face >= 0, lambda m: rt.faces[ref.face[m]])):
+        nodes = anc[corners(hit)]  # (hits, 3) active nodes at the face's corners
+        coarse = nodes >= h.num_vertices
+        share = 0.5 * d2[hit] * ref.cell / np.maximum(coarse.sum(1), 1)
+        err += np.bincount(nodes[coarse], np.broadcast_to(share[:, None], nodes.shape)[coarse], h.num_nodes)
+    order = np.argsort(-err, kind="stable")
+    order = order[(err[order] > 0) & ~rt.refinement.pinned[order]]  # a pinned node that is still active: not again
+    return order[: int(np.searchsorted(np.cumsum(err[order]), excess)) + 1]
+
+
+def clipped_squares(a: np.ndarray, b: np.ndarray, white: float) -> tuple[np.ndarray, np.ndarray]:
+    """(the squared difference of radiance ``a`` against ``b`` (..., 3), both clipped at ``white``, in units of
+    white squared, averaged over RGB, 0 where both are black; where either is non-black)."""
+    a, b, white = np.asarray(a, np.float64), np.asarray(b, np.float64), float(white)
+    covered = (a.max(-1) > 0) | (b.max(-1) > 0)
+    d2 = np.mean((np.minimum(a, white) - np.minimum(b, white)) ** 2, -1) / white**2
+    return np.where(covered, d2, 0.0), covered
 
 
 def clipped_mse(a: np.ndarray, b: np.ndarray, white: float) -> tuple[float, int]:
-    """(mean squared difference, entries it is over) of radiance ``a`` against ``b`` (..., 3), both clipped at
-    ``white``, in units of white squared, averaged over RGB and over the entries where either is non-black: E-1's
-    and the measured frame error's (``lodprt.display.error_figure.error_numbers``) PSNR is -10 log10 of it."""
-    a, b, white = np.asarray(a, np.float64), np.asarray(b, np.float64), float(white)
-    covered = (a.max(-1) > 0) | (b.max(-1) > 0)
+    """(mean squared difference, entries it is over) of ``clipped_squares`` over the entries where either is
+    non-black: E-1's and the measured frame error's (``lodprt.display.error_figure.error_numbers``) PSNR is
+    -10 log10 of it."""
+    d2, covered = clipped_squares(a, b, white)
     n = int(covered.sum())
-    if not n:
-        return 0.0, 0
-    return float(np.mean((np.minimum(a, white) - np.minimum(b, white))[covered] ** 2)) / white**2, n
+    return (float(d2.sum()) / n if n else 0.0), n
 
 
 def hit_radiance(rt, corner_rows: np.ndarray, bary: np.ndarray, ids: np.ndarray, coef: np.ndarray) -> np.ndarray:

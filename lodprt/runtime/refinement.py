@@ -69,6 +69,8 @@ class CutRefinement:
         self.dirty, self.settled = True, False  # something changed since the cut settled; it has settled
         #: (N,) errors that add to the criterion's this frame (M-6: the actual light's shadow edges), or None
         self.extra: np.ndarray | None = None
+        #: (N,) nodes kept split whatever their error (E-5: where a still frame's measured error is), and how many
+        self.pinned, self.pins = np.zeros(h.num_nodes, bool), 0
 
     def reset(self, cut) -> None:
         """Start again from ``cut`` (LOD switched): the first frame converges in full."""
@@ -77,6 +79,15 @@ class CutRefinement:
         self.blocker[:] = -1
         self.fails[:] = 0
         self.retry_at[:] = 0
+        self.pin(None)
+
+    def pin(self, nodes: np.ndarray | None) -> None:
+        """E-5: keep ``nodes`` split from now on (None: pin none any more); the cut moves again."""
+        if nodes is None:
+            self.pinned[:] = False
+        else:
+            self.pinned[nodes] = True
+        self.pins = int(self.pinned.sum()) if nodes is not None else 0
         self.dirty = True
 
     def one_pass(self, errors: ErrorCache, evaluate, bound: float, *, backoff: bool = False) -> tuple[int, int, int]:
@@ -98,9 +109,10 @@ class CutRefinement:
         culled, err = errors.lookup(nodes, bound, evaluate, self.converged_once)
         if self.extra is not None:  # M-6: a node at the actual light's shadow edge refines, its parent stays split
             err = np.maximum(err, self.extra[nodes])
+        err = np.where(self.pinned[nodes], np.inf, err)  # E-5: a pinned node refines, and never collapses
         k, frame = len(rc), errors.frame
-        want_refine = ~culled[:k] & (err[:k] > bound)
-        want_coarsen = culled[k:] | (err[k:] * HYSTERESIS <= bound)
+        want_refine = (~culled[:k] | self.pinned[rc]) & (err[:k] > bound)  # E-5: a pinned node's pixels were seen
+        want_coarsen = (culled[k:] & ~self.pinned[cc]) | (err[k:] * HYSTERESIS <= bound)
         refined = coarsened = touched = 0
         # a collapse found blocked waits until the finer neighbour found blocking it is gone (one per node);
         # collapses, then forced splits, are made in turn by the sequential kernels (Cut.coarsen_list /

@@ -31,6 +31,7 @@ from lodprt.runtime import node_bounds
 from lodprt.runtime import frame_error
 from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
+from lodprt.runtime.frame_error import BOUND_RANGE
 from lodprt.runtime.frames import Frame
 from lodprt.runtime.refinement import HYSTERESIS, CutRefinement, ErrorCache
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
@@ -46,7 +47,7 @@ log = logging.getLogger(__name__)
 #: LIGHT_JUMP of their sum, counts as a jump
 JUMP = 0.1
 LIGHT_JUMP = 0.4
-#: E-4: steering rounds of the first frame with a target_psnr (each converges the cut for the new bound)
+#: E-5: rounds of pins on the first frame and a still one with a target_psnr (each converges the cut)
 FIRST_ROUNDS = 12
 #: M-6: rounds of the first frame that refine along the actual light's shadow edges (each relights the cut and
 #: splits the nodes whose triangles straddle an edge by more than the bound)
@@ -83,8 +84,8 @@ class Runtime:
     criterion: a ``lodprt.runtime.criteria.Criterion`` (default ``ScreenCriterion()``: S-1 with S-2; or
     ``ThesisCriterion``: T-14) holding its settings, or its name ("screen", "thesis") with the settings as keywords:
     error_bound (refine above, coarsen at or below bound / HYSTERESIS; None: the criterion's default), alpha
-    (T-14's weight of e_geo, "thesis"), pixel_tolerance and target_psnr ("screen": steer the bound toward this
-    estimated PSNR of the frame against the full mesh, E-1..E-4, ``error_bound`` being the starting bound; by
+    (T-14's weight of e_geo, "thesis"), pixel_tolerance and target_psnr ("screen": refine until the frame meets
+    this estimated PSNR against the full mesh, E-1..E-5, ``error_bound`` the steering's start in motion; by
     default ``criteria.DEFAULT_TARGET_PSNR``, off ("off") when error_bound or triangle_budget is given alone);
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
     so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
@@ -120,6 +121,7 @@ class Runtime:
         self.estimate_stride = None  # the last estimate's cells, in pixels (1: every pixel; E-2)
         self.view_jumped = False  # the camera jumped since the last frame (set_camera)
         self.schedule = frame_error.EstimateSchedule()  # which frames estimate E-1, on the grid or every pixel
+        self.motion_bound = None  # E-4's bound, kept aside while a still frame draws E-5's pinned cut
         #: E-4: the search for the largest bound whose frame meets target_psnr (None without a target)
         self.steering = frame_error.Steering(self.criterion.target_psnr, STEER_STEP) if self.criterion.steered() \
             else None
@@ -313,7 +315,7 @@ class Runtime:
         self.errors.refresh_all = True
 
     def set_lod(self, enabled: bool) -> None:
-        """LOD off shows the full mesh (every leaf active); on starts again from the base mesh."""
+        """LOD off shows the full mesh (every leaf active); on starts again from the base mesh (no pins)."""
         self.lod = bool(enabled)
         self.refinement.reset(Cut.base(self.h, self.faces) if self.lod else Cut.full(self.h, self.faces))
         self.errors.refresh_all = self.view_jumped = True
@@ -413,10 +415,8 @@ class Runtime:
     def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, coefficients: np.ndarray | None = None, *,
                              steer: bool = True, every_pixel: bool = False) -> None:
         """E-1..E-3 of the current cut (``estimated_psnr``; ``vid``, ``tri``: its mesh as ``_cut_mesh`` gives it,
-        ``coefficients``: its relit (A, 3, ncoef) ones when the frame has them, else relit here; on E-2's grid, or
-        with ``every_pixel`` one ray per pixel) and, with a target_psnr and ``steer``, E-4: the bound for the next
-        frames from the steering's search (``frame_error.Steering``, settled within STEER_STEP; the cached errors
-        stay: a node cached under the old bound is evaluated again when due)."""
+        ``coefficients`` its relit ones or None; on E-2's grid, or every pixel) and, with a target_psnr and
+        ``steer``, E-4: the bound for the next frames (``frame_error.Steering``, settled within STEER_STEP)."""
         self.estimate_stride = 1 if every_pixel else frame_error.coverage_stride(self.camera.width,
                                                                                  self.camera.height)
         self.estimated_psnr, new = frame_error.estimate(self, vid, tri, self.steering if steer else None,
@@ -425,9 +425,8 @@ class Runtime:
             self.error_bound, self.refinement.dirty = new, True
 
     def relit(self, vertex_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """((K, 3, ncoef) coefficients, (K, 3) radiance toward the eye) float32 of ``vertex_ids`` under the current
-        lights, as a frame relights its vertices (T-7 with M-1; any vertex, in the cut or not), leaving the last
-        frame's relighting state (M-6's lit lights) as it was."""
+        """((K, 3, ncoef) coefficients, (K, 3) radiance toward the eye) float32 of ``vertex_ids``, as a frame relights
+        (T-7 with M-1; any vertex), leaving the last frame's relighting state (M-6's lit lights) as it was."""
         lighting = self.lighting
         kept = lighting.frame_lit, None if lighting.direct is None else lighting.direct.lit
         try:
@@ -438,8 +437,7 @@ class Runtime:
                 lighting.direct.lit = kept[1]
 
     def scene_bvh(self):
-        """Warp mesh (BVH) of the store's triangles on the Runtime's device, face ids as in ``faces``: the direct
-        light's when it has one, else built once (E-2's rays)."""
+        """Warp mesh (BVH) of the store's triangles on the device, face ids as in ``faces`` (E-2's rays)."""
         d = self.lighting.direct
         if d is not None:
             return d.mesh
@@ -455,42 +453,31 @@ class Runtime:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
         t0 = time.perf_counter()
         self.errors.frame += 1
-        # E-4: the first frame steers until it meets the target, on every pixel; then ``EstimateSchedule``
-        settle = not self.refinement.converged_once
-        due, still = self.schedule.begin(self.errors.frame, settle, self.view_jumped, self.steering)
-        self.view_jumped = False
-        refined, coarsened, touched, passes = self._converge(max_passes)
+        # E-5 on the first frame and a still one, E-4 on E-2's grid in motion: ``frame_error.EstimateSchedule``
+        settle, jumped, self.view_jumped = not self.refinement.converged_once, self.view_jumped, False
+        due, still = self.schedule.begin(self.errors.frame, settle, jumped, self.steering)
+        estimating = self.lod and self.target_psnr is not None and due
+        pinning = estimating and (settle or still)
+        if pinning or (not still and self.motion_bound is not None):  # E-5 from the coarsest bound; moving: E-4's
+            self.motion_bound, self.error_bound = (self.motion_bound or self.error_bound, BOUND_RANGE[1]) \
+                if pinning else (None, self.motion_bound)
+            self.refinement.pin(None)
+            self.errors.refresh_all = True
+        refined, coarsened, touched, passes = self._converge(10_000 if pinning else max_passes)
         t1 = time.perf_counter()
         vid, tri = self._cut_mesh()
         t2 = time.perf_counter()
         counts = (refined, coarsened, touched, passes)
         coef = rad = None
-        estimating = self.lod and self.target_psnr is not None and due  # E-4: steer the bound
-        if estimating and settle:  # the first frame steers until the target holds
-            for _ in range(FIRST_ROUNDS):
-                # M-6 first: each round's estimate sees the cut the frame draws at that bound
-                vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts)
-                self.estimate_frame_error(vid, tri, coef, every_pixel=True)
-                if not self.refinement.dirty:
-                    break
-                counts = tuple(a + b for a, b in zip(counts, self._converge(10_000)))
-                vid, tri = self._cut_mesh()
-                coef = None
-            else:  # out of rounds on a bound not estimated: the largest bound that met, when one did
-                met = self.steering.meets
-                if met is not None and met != self.error_bound:
-                    self.error_bound, self.refinement.dirty = met, True
-                    counts = tuple(a + b for a, b in zip(counts, self._converge(10_000)))
-                    vid, tri = self._cut_mesh()
-                    self.estimate_frame_error(vid, tri, every_pixel=True, steer=False)  # E-3 of the cut drawn
-            self.schedule.confirmed = self.steering.settled()
+        if pinning:
+            vid, tri, coef, rad, counts = self._pin_rounds(vid, tri, counts)
+            self.schedule.confirmed = True
         steer = time.perf_counter() - t2  # the estimate and steering count as cut work
         if coef is None:
             coef, rad = self._relight(vid)
         t3 = time.perf_counter()
-        if estimating and not settle:  # from this frame's relit cut; the bound moves for the next frames
-            self.estimate_frame_error(vid, tri, coef, every_pixel=still)
-            self.schedule.confirmed = still and self.steering.settled() and not self.refinement.dirty
+        if estimating and not pinning:  # E-4 from this frame's relit cut; the bound moves for the next frames
+            self.estimate_frame_error(vid, tri, coef)
         if settle:  # M-6: the first frame follows the light's shadow edges
             vid, tri, coef, rad, counts = self._edge_rounds(vid, tri, counts, (coef, rad))
         else:
@@ -502,28 +489,40 @@ class Runtime:
             new = frame_error.toward_budget(self.error_bound, len(tri), self.triangle_budget)
             self.error_bound, self.refinement.dirty = new, self.refinement.dirty or new != self.error_bound
         stats = {
-            "triangles": int(len(tri)),
-            "active_nodes": int(len(self.cut.nodes)),
-            "vertices": int(len(vid)),
-            "nodes_touched": int(touched),
-            "refined": int(refined),
-            "coarsened": int(coarsened),
-            "passes": int(passes),
-            "criterion": self.criterion.name,
+            "triangles": int(len(tri)), "active_nodes": int(len(self.cut.nodes)), "vertices": int(len(vid)),
+            "nodes_touched": int(touched), "refined": int(refined), "coarsened": int(coarsened),
+            "passes": int(passes), "criterion": self.criterion.name,
             **self.criterion.settings(),  # the active criterion's knobs only (error_bound steered)
             "lights_clamped": int(self.lights_clamped),
             "shadow_rays": int(self.lighting.rays),  # M-3: rays cast toward the lights
             "estimated_psnr_db": self.estimated_psnr,  # E-3 (None without a target_psnr)
             "estimate_stride_px": self.estimate_stride,  # its cells (1: every pixel, the first and still frames)
-            "ms_cut": 1e3 * (t1 - t0 + steer),
-            "ms_triangulate": 1e3 * (t2 - t1),
-            "ms_relight": 1e3 * (t3 - t2 - steer),
-            "ms_total": 1e3 * (t3 - t0),
+            "pinned_nodes": self.refinement.pins,  # E-5 (first and still frames)
+            "ms_cut": 1e3 * (t1 - t0 + steer), "ms_triangulate": 1e3 * (t2 - t1),
+            "ms_relight": 1e3 * (t3 - t2 - steer), "ms_total": 1e3 * (t3 - t0),
         }
         return Frame(vertex_ids=vid, positions=np.take(self.positions, vid, axis=0),
                      normals=np.take(self.normals, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
+
+    def _pin_rounds(self, vid, tri, counts: tuple) -> tuple:
+        """E-5 on the cut at the coarsest bound: split the nodes that carry the frame's error measured on every pixel
+        (``frame_error.pin``) until it meets the target (at most FIRST_ROUNDS rounds). ``_edge_rounds``' tuple."""
+        for _ in range(FIRST_ROUNDS):
+            coef, rad = self._relight(vid)
+            self.estimated_psnr, nodes = frame_error.pin(self, vid, tri, coef)
+            self.estimate_stride = 1
+            if not len(nodes):
+                return vid, tri, coef, rad, counts
+            self.refinement.pin(nodes)
+            more = self._converge(10_000)
+            counts = tuple(a + b for a, b in zip(counts, more))
+            if not more[0]:  # no node could split
+                return vid, tri, coef, rad, counts
+            vid, tri = self._cut_mesh()
+        self.estimate_frame_error(vid, tri, every_pixel=True, steer=False)  # E-3 of the cut drawn
+        return vid, tri, None, None, counts
 
     def _edge_rounds(self, vid, tri, counts: tuple, relit: tuple | None = None) -> tuple:
         """M-6 on a first frame: relight the cut (unless ``relit`` holds its (coefficients, radiance)), then refine
