@@ -193,36 +193,38 @@ def test_a_pinned_node_stays_split_even_culled(bunny_store):
 
 
 def test_pins_cover_the_excess():
-    """E-5's choice on a hand-made frame: each ray's error is shared half by the cut's face's coarse corners and
-    half by the full mesh's, and the nodes with the largest shares are taken until they cover the excess over the
-    budget; none when the frame meets it."""
+    """E-5's choice on a hand-made frame: each ray's error goes to the mesh it meets first (the cut's or the full
+    one), shared by the coarse active nodes at the corners of the face it met there, and the nodes with the largest
+    shares are taken until they cover the excess over the budget; none when the frame meets it; a node pinned
+    already is not taken again."""
     from types import SimpleNamespace
 
     from lodprt.runtime.frame_error import Reference, pinned_nodes
 
-    V = 6  # leaves 0..5; nodes 6, 7, 8 coarse
+    V = 6  # leaves 0..5 (0..4 at depth 1, 5 at depth 3 from the eye); nodes 6, 7, 8 coarse
     anc = np.array([6, 6, 7, 7, 8, 5])
+    positions = np.zeros((V, 3))
+    positions[:, 2] = [1, 1, 1, 1, 1, 3]
     rt = SimpleNamespace(h=SimpleNamespace(num_nodes=9, num_vertices=V), cut=SimpleNamespace(anc=anc),
-                         faces=np.array([[0, 2, 4], [1, 3, 5], [5, 5, 5]]),
+                         faces=np.array([[0, 2, 4], [1, 3, 5], [5, 5, 5]]), positions=positions,
+                         camera=SimpleNamespace(eye=(0.0, 0.0, 0.0)),
                          refinement=SimpleNamespace(pinned=np.zeros(9, bool)))
     vid = np.arange(V)
-    triangles = np.array([[0, 2, 5], [4, 5, 5]])  # cut faces: coarse corners {6, 7} and {8}
-    ref = Reference(1, np.array([0, 2, -1, 1]), np.zeros((4, 3)), np.zeros((4, 3)), 1.0)
-    cface = np.array([0, 1, 1, -1])
+    triangles = np.array([[0, 2, 5], [4, 5, 5]])  # the cut's faces
+    third = np.full((4, 3), 1 / 3)
+    ref = Reference(1, np.array([0, 2, -1, 1]), third, np.zeros((4, 3)), 1.0)
+    cut_hits = (np.array([0, 1, 1, -1]), third)
     d2 = np.array([0.4, 0.2, 0.1, 0.3])
-    # shares: ray 0: cut {6,7} 0.1 each, full face 0 {6,7,8} 0.2/3 each; ray 1: cut {8} 0.1, full face 2 (all leaf 5)
-    # nothing; ray 2: cut {8} 0.05; ray 3: full face 1 {6,7} 0.075 each
-    err = {6: 0.1 + 0.4 / 6 + 0.075, 7: 0.1 + 0.4 / 6 + 0.075, 8: 0.4 / 6 + 0.1 + 0.05}
+    # ray 0: full face 0 (depth 1) before cut face 0 (5/3): {6, 7, 8} 0.4/3 each; ray 1: cut face 1 (7/3) before
+    # full face 2 (3): {8} 0.2; ray 2: the cut only: {8} 0.1; ray 3: the full mesh only, face 1: {6, 7} 0.15 each
+    err = {6: 0.4 / 3 + 0.15, 7: 0.4 / 3 + 0.15, 8: 0.4 / 3 + 0.2 + 0.1}
+    assert abs(sum(err.values()) - d2.sum()) < 1e-12
     total = d2.sum()
-    assert len(pinned_nodes(rt, vid, triangles, ref, d2, cface, total)) == 0
-    got = pinned_nodes(rt, vid, triangles, ref, d2, cface, total - 0.2)
-    assert list(got) == [6]  # 6 and 7 tie (the stable order takes 6): one covers 0.2 of the excess
-    got = pinned_nodes(rt, vid, triangles, ref, d2, cface, total - err[6] - 0.01)
-    assert sorted(got) == [6, 7]
-    # unattributed: ray 1's full side (leaves only), ray 2's full side and ray 3's cut side (they met nothing)
-    assert abs(sum(err.values()) - (total - 0.1 - 0.05 - 0.15)) < 1e-12
-    rt.refinement.pinned[6] = True  # pinned already (and still active: it could not split): the next ones
-    assert list(pinned_nodes(rt, vid, triangles, ref, d2, cface, total - 0.2)) == [7]
+    assert len(pinned_nodes(rt, vid, triangles, ref, d2, cut_hits, total)) == 0
+    assert list(pinned_nodes(rt, vid, triangles, ref, d2, cut_hits, total - 0.2)) == [8]
+    assert list(pinned_nodes(rt, vid, triangles, ref, d2, cut_hits, total - err[8] - 0.01)) == [8, 6]  # 6, 7 tie
+    rt.refinement.pinned[8] = True  # pinned already (and still active: it could not split): the next one
+    assert list(pinned_nodes(rt, vid, triangles, ref, d2, cut_hits, total - 0.2)) == [6]
 
 
 def test_bad_target_is_a_clear_error(bunny_store):

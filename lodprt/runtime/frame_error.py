@@ -19,8 +19,8 @@ per-node bound toward a stated PSNR in motion, and the refinement of a still fra
           its subtree's collapses times its projected area; the rest are refined), or, under SLACK of the budget,
           b raised by sqrt(budget / SSE) (at least RAISE); never by more than MAX_STEP at once
     E-5   a still frame (``pin``): from the coarsest bound, split the coarse nodes carrying the most of E-1 on
-          every pixel (each ray's share: half to the coarse corners of the face it meets in the cut, half to
-          those in the full mesh) until they cover the excess over 10^(-PSNR / 10) N; measure again; repeat
+          every pixel (each ray's to the coarse corners of the face it meets first, in the cut's mesh or the
+          full one) until they cover the excess over 10^(-PSNR / 10) N; measure again; repeat
 
 E-1 measures the frame's own error the way ``lodprt.display.compare`` measures it, on a sample of its pixels:
 shading (the cut's coarse triangles interpolate what the full mesh's fine ones resolve), shadow edges, highlights
@@ -280,11 +280,11 @@ def ray_errors(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference,
     with M-1), their positions, normals and coefficients interpolated at the hit and evaluated toward the eye
     (``kernels.runtime.hit_radiance``). Returns (R,) the squared difference, both clipped at white, averaged over
     RGB, in units of white squared (0 where neither is non-black), (R,) covered: either non-black (what
-    ``lodprt.display.error_figure.error_numbers`` averages over the pixels), and (R,) the row of ``triangles``
-    each ray met (-1: none)."""
+    ``lodprt.display.error_figure.error_numbers`` averages over the pixels), (R,) the row of ``triangles`` each
+    ray met (-1: none) and (R, 3) the hit's weights of its corners."""
     vid = np.asarray(vid, np.int64)
     drawn = np.zeros_like(ref.drawn)
-    cface = np.full(len(ref.face), -1, np.int32)
+    cface, cbary = np.full(len(ref.face), -1, np.int32), np.zeros((len(ref.face), 3), np.float32)
     if len(triangles):
         cface, cbary = screen_hits(rt, cut_bvh(rt, vid, triangles), stride=ref.stride)[:2]
         chit = cface >= 0
@@ -299,38 +299,46 @@ def ray_errors(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference,
             rows[chit] = corners
         drawn = hit_radiance(rt, rows, cbary, ids, coef)
     d2, covered = clipped_squares(drawn, ref.drawn, rt.white)
-    return d2, covered, cface
+    return d2, covered, cface, cbary
 
 
 def pin(rt, vid: np.ndarray, triangles: np.ndarray, coefficients: np.ndarray | None) -> tuple[float, np.ndarray]:
     """E-3 of the Runtime ``rt``'s current cut on every pixel (``ray_errors``) and E-5's nodes to split so that it
     meets ``rt.target_psnr`` (``pinned_nodes``; empty when it meets it)."""
     ref = reference(rt, 1)
-    d2, covered, cface = ray_errors(rt, vid, triangles, ref, coefficients)
+    d2, covered, cface, cbary = ray_errors(rt, vid, triangles, ref, coefficients)
     n = float(covered.sum()) * ref.cell
     budget = 10.0 ** (-rt.target_psnr / 10.0) * n
-    return psnr(float(d2.sum()) * ref.cell, n), pinned_nodes(rt, vid, triangles, ref, d2, cface, budget)
+    return psnr(float(d2.sum()) * ref.cell, n), pinned_nodes(rt, vid, triangles, ref, d2, (cface, cbary), budget)
 
 
-def pinned_nodes(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference, d2: np.ndarray, cface: np.ndarray,
+def pinned_nodes(rt, vid: np.ndarray, triangles: np.ndarray, ref: Reference, d2: np.ndarray, cut_hits: tuple,
                  budget: float) -> np.ndarray:
     """E-5: the coarse nodes of the current cut to split so that the frame meets its budget of squared error
     (``budget``: ``10^(-P / 10)`` times the covered pixels): each ray's squared difference ``d2`` (``ray_errors``,
-    on every pixel) goes half to the cut's side and half to the full mesh's, each half shared equally by the
-    coarse active nodes (``Runtime.cut.anc`` of the corners) of the face the ray met in that mesh (``cface`` in
-    the cut's ``triangles`` over ``vid``; ``ref.face`` in the full mesh); the nodes with the largest shares,
-    largest first, until their sum covers the excess over the budget. Empty when the frame meets it."""
+    on every pixel) goes to the mesh the ray meets first, the cut's (``cut_hits``: the face of ``triangles`` over
+    ``vid`` and the hit's weights) or the full one (``ref``; a cut drawn in front of the full mesh, or a surface
+    the cut lost), shared equally by the coarse active nodes (``Runtime.cut.anc`` of the corners) of the face it
+    met there; the nodes with the largest shares, largest first, until their sum covers the excess over the
+    budget (a node pinned already is not chosen again). Empty when the frame meets it."""
     excess = float(d2.sum()) * ref.cell - budget
     if excess <= 0:
         return np.zeros(0, np.int64)
     h, anc = rt.h, rt.cut.anc
     err = np.zeros(h.num_nodes)
+    cface, cbary = cut_hits
     tri = np.asarray(triangles, np.int64)
-    for hit, corners in ((cface >= 0, lambda m: np.asarray(vid, np.int64)[tri[cface[m]]]),
-                         (ref.face >= 0, lambda m: rt.faces[ref.face[m]])):
-        nodes = anc[corners(hit)]  # (hits, 3) active nodes at the face's corners
+    corners = (np.asarray(vid, np.int64)[tri[cface[cface >= 0]]], rt.faces[ref.face[ref.face >= 0]])
+    depth = [np.full(len(d2), np.inf), np.full(len(d2), np.inf)]  # where each ray meets the cut's mesh, the full
+    for k, (hit, bary) in enumerate(((cface >= 0, cbary), (ref.face >= 0, ref.bary))):
+        at = np.einsum("rk,rkd->rd", np.asarray(bary[hit], np.float64), rt.positions[corners[k]])
+        depth[k][hit] = np.linalg.norm(at - np.asarray(rt.camera.eye, np.float64), axis=1)
+    nearer = depth[0] <= depth[1]  # the surface the ray meets first is the one in error
+    for k, hit in enumerate((cface >= 0, ref.face >= 0)):
+        nodes = anc[corners[k]]  # (hits, 3) active nodes at the face's corners
         coarse = nodes >= h.num_vertices
-        share = 0.5 * d2[hit] * ref.cell / np.maximum(coarse.sum(1), 1)
+        mine = (nearer if k == 0 else ~nearer)[hit]
+        share = np.where(mine, d2[hit], 0.0) * ref.cell / np.maximum(coarse.sum(1), 1)
         err += np.bincount(nodes[coarse], np.broadcast_to(share[:, None], nodes.shape)[coarse], h.num_nodes)
     order = np.argsort(-err, kind="stable")
     order = order[(err[order] > 0) & ~rt.refinement.pinned[order]]  # a pinned node that is still active: not again
