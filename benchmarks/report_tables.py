@@ -62,6 +62,12 @@ def _scene_label(scene: str, floor) -> str:
     return f"{'bunny' if scene == 'stanford-bunny' else scene} + {floor}"
 
 
+def grid_db(row: dict) -> str:
+    """A static row's E-3 on the grid, or "-" for results from before it was measured."""
+    v = row.get("grid_psnr_db")
+    return "-" if v is None or v != v else f"{v:.1f} dB"
+
+
 def static_table(r: dict, family: str, label) -> str:
     """The static views of one scene family (rows without ``family`` are the shared models'), ``label(scene)``
     naming each scene: the default (at its target: x fewer, measured PSNR, estimated on every pixel as the frame
@@ -77,7 +83,7 @@ def static_table(r: dict, family: str, label) -> str:
         rows.append([label(scene), view]
                     + ([] if d is None else [f"{n(d['triangles'])} / {n(d['full'])}", g(d["fewer"], 2),
                                              f"{d['psnr_db']:.1f} dB", f"{d['estimated_psnr_db']:.1f} dB",
-                                             f"{d.get('grid_psnr_db', float('nan')):.1f} dB"])
+                                             grid_db(d)])
                     + [g(s["fewer"], 2), f"{s['psnr_db']:.1f} dB", g(t["fewer"], 2), f"{t['psnr_db']:.1f} dB"])
     head = ["scene", "view"]
     if any("default" in by for by in views.values()):
@@ -106,7 +112,7 @@ def view_cut_between(r: dict) -> str:
     rows = [[_scene_label(v["scene"], r["floor"]) if v.get("family", "shared") == "shared" else v["scene"],
              v["view"], v["light"], f"{n(v['triangles'])} / {n(v['full'])}", g(v["fewer"], 2),
              f"{v['psnr_db']:.1f} dB", f"{v['estimated_psnr_db']:.1f} dB",
-             f"{v.get('grid_psnr_db', float('nan')):.1f} dB"]
+             grid_db(v)]
             for v in r["static_views"] if v.get("light", "sample") != "sample"]
     if not rows:
         return NOT_MEASURED

@@ -107,6 +107,20 @@ def test_sampled_error_on_every_pixel_is_the_measured_error(bunny_store, bound, 
     assert abs(-10 * np.log10(s.mean) - want) < 0.3, (-10 * np.log10(s.mean), want)
 
 
+def test_ray_stride_bounds_the_rays():
+    """E-2's cells: every pixel when asked (1) up to MAX_RAYS rays, the grid by default, and never more than
+    MAX_RAYS rays however large the frame (a frame too large for every pixel takes a ray every few pixels)."""
+    import math
+
+    from lodprt.runtime.frame_error import MAX_RAYS, coverage_stride, ray_stride
+
+    assert ray_stride(640, 480, 1) == 1 and ray_stride(4096, 4096, 1) == 1
+    assert ray_stride(640, 480) == coverage_stride(640, 480) == 3
+    for w, h in ((4097, 4096), (100_000, 100_000), (1, 10**9)):
+        k = ray_stride(w, h, 1)
+        assert math.ceil(w / k) * math.ceil(h / k) <= 1.01 * MAX_RAYS + w + h and k > 1
+
+
 def test_estimate_schedule():
     """The estimates' schedule: the first frame estimates; a still frame after it does not (the first frame's
     pins hold); frames in motion estimate every ESTIMATE_FRAMES frames (on the grid), a bracket kept but for a

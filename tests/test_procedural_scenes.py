@@ -161,7 +161,8 @@ def static_row(scene, family, view, setting, psnr, fewer):
     criterion = {"default": "screen (target 36 dB)", "screen": "screen (bound 0.8)", "thesis": "thesis"}[setting]
     return {"scene": scene, "family": family, "view": view, "setting": setting, "criterion": criterion,
             "triangles": round(1000 / fewer), "full": 1000, "fewer": fewer, "psnr_db": psnr,
-            "estimated_psnr_db": psnr - 2.0 if setting == "default" else float("nan")}
+            "estimated_psnr_db": psnr - 2.0 if setting == "default" else float("nan"),
+            "grid_psnr_db": psnr - 3.0 if setting == "default" else float("nan")}
 
 
 def test_static_summary_and_its_tables():
@@ -185,7 +186,7 @@ def test_static_summary_and_its_tables():
     r = {"floor": 200, "static_views": rows, "static_summary": summary}
     shared = report_tables.view_cut_static(r)
     assert "spot + 200" in shared and "comb" not in shared
-    assert "| 200 / 1,000 | 5.0 | 39.0 dB | 37.0 dB | 6.0 | 41.0 dB | 60 | 25.0 dB |" in shared  # the default beside the fixed bound
+    assert "| 200 / 1,000 | 5.0 | 39.0 dB | 37.0 dB | 36.0 dB | 6.0 | 41.0 dB | 60 | 25.0 dB |" in shared  # the default beside the fixed bound
     made = report_tables.view_cut_procedural(r)
     assert "| comb | front |" in made and "spot" not in made
     assert "33.5 dB | comb, front" in report_tables.view_cut_summary(r)

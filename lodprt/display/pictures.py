@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.display.render import Renderer
+from lodprt.display.render import Renderer, check_size
 from lodprt.runtime.frames import auto_white
 from lodprt.errors import LodprtError
 from lodprt.runtime.camera import orbit, rotate_about
@@ -140,12 +140,13 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
                           interpolation=interpolation, target_psnr=target_psnr, outside=outside)
     source.set_lights(lights, colors)
-    source.set_camera(camera)
-    frame = source.update()
+    cam = source.set_camera(camera) or camera
     linear = out.suffix.lower() in LINEAR_SUFFIXES
-    if draw.get("white") is None and not linear:
-        draw["white"] = source.white or auto_white(frame.radiance)
     with Renderer() as renderer:
+        check_size((cam.width, cam.height), renderer.ctx)  # a size the context cannot draw fails before the frame
+        frame = source.update()
+        if draw.get("white") is None and not linear:
+            draw["white"] = source.white or auto_white(frame.radiance)
         t0 = time.perf_counter()
         image = renderer.image(frame, linear=linear, **draw)
         ms = 1e3 * (time.perf_counter() - t0)

@@ -247,7 +247,8 @@ def reference(rt, stride: int) -> Reference:
     """E-1's full-mesh side on the grid of ``stride`` pixel cells for the Runtime ``rt``'s camera and lights: the
     rays' first faces (``screen_hits``), their corners relit (``Runtime.relit``) and drawn as fragments
     (``hit_radiance``); made again only when the grid, the camera or the lights changed."""
-    key = (int(stride), rt.camera, np.asarray(rt.light_positions, np.float64).tobytes(),
+    stride = ray_stride(rt.camera.width, rt.camera.height, stride)
+    key = (stride, rt.camera, np.asarray(rt.light_positions, np.float64).tobytes(),
            np.asarray(rt.light_colors, np.float64).tobytes())
     held = _REFERENCE.get(rt)
     if held is not None and held[0] == key:
@@ -258,7 +259,7 @@ def reference(rt, stride: int) -> Reference:
     rows = np.full((len(face), 3), -1, np.int32)
     rows[hit] = inverse.reshape(-1, 3)
     coef = rt.relit(ids)[0] if len(ids) else np.zeros((0, 3, 1), np.float32)
-    ref = Reference(int(stride), face, bary, hit_radiance(rt, rows, bary, ids, coef), cell)
+    ref = Reference(stride, face, bary, hit_radiance(rt, rows, bary, ids, coef), cell)
     _REFERENCE[rt] = (key, ref)
     return ref
 
@@ -399,6 +400,16 @@ def cut_bvh(rt, vid: np.ndarray, triangles: np.ndarray):
 
 #: E-1, E-2: about this many primary rays per frame, one per square cell of the screen (at least a pixel)
 COVERAGE_RAYS = 30_000
+#: E-2: at most this many rays in a frame's estimate, on every pixel up to a 4096 x 4096 frame (the full mesh's side,
+#: kept for the camera, holds 28 bytes a ray: about 470 MB); a larger frame takes a ray every few pixels each way
+MAX_RAYS = 1 << 24
+
+
+def ray_stride(width: int, height: int, stride: int | None = None) -> int:
+    """E-2: the side in pixels of the cells of a ``width`` x ``height`` frame's rays: ``stride`` (1: every pixel;
+    None: ``coverage_stride``), widened so that the frame has at most MAX_RAYS of them."""
+    stride = coverage_stride(width, height) if stride is None else max(1, int(stride))
+    return max(stride, math.ceil(math.sqrt(width * height / MAX_RAYS)))
 
 
 def coverage_stride(width: int, height: int) -> int:
@@ -416,7 +427,7 @@ def screen_hits(rt, mesh=None, stride: int | None = None) -> tuple[np.ndarray, n
     from lodprt.kernels import runtime as kr
 
     cam = rt.camera
-    stride = coverage_stride(cam.width, cam.height) if stride is None else max(1, int(stride))
+    stride = ray_stride(cam.width, cam.height, stride)
     cols, rows = max(1, -(-cam.width // stride)), max(1, -(-cam.height // stride))
     inv = np.linalg.inv(np.asarray(rt.vp, np.float64))
     eye = np.asarray(cam.eye, np.float64)

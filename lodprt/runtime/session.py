@@ -417,8 +417,8 @@ class Runtime:
         """E-1..E-3 of the current cut (``estimated_psnr``; ``vid``, ``tri``: its mesh as ``_cut_mesh`` gives it,
         ``coefficients`` its relit ones or None; on E-2's grid, or every pixel) and, with a target_psnr and
         ``steer``, E-4: the bound for the next frames (``frame_error.Steering``, settled within STEER_STEP)."""
-        self.estimate_stride = 1 if every_pixel else frame_error.coverage_stride(self.camera.width,
-                                                                                 self.camera.height)
+        self.estimate_stride = frame_error.ray_stride(self.camera.width, self.camera.height,
+                                                      1 if every_pixel else None)
         self.estimated_psnr, new = frame_error.estimate(self, vid, tri, self.steering if steer else None,
                                                         coefficients, stride=self.estimate_stride)
         if new is not None and new != self.error_bound:
@@ -512,7 +512,7 @@ class Runtime:
         for _ in range(FIRST_ROUNDS):
             coef, rad = self._relight(vid)
             self.estimated_psnr, nodes = frame_error.pin(self, vid, tri, coef)
-            self.estimate_stride = 1
+            self.estimate_stride = frame_error.ray_stride(self.camera.width, self.camera.height, 1)
             if not len(nodes):
                 return vid, tri, coef, rad, counts
             self.refinement.pin(nodes)
