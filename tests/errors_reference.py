@@ -10,7 +10,7 @@ import numpy as np
 from lodprt.errors import LodprtError
 from lodprt.model import sh
 from lodprt.runtime.frames import display
-from lodprt.runtime.session import NodeErrors
+from lodprt.runtime.node_bounds import NodeErrors
 
 
 #: S-1's constants as docs/RUNTIME.md states them (the oracle's own copies, not the production criterion's): the

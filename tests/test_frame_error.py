@@ -148,9 +148,10 @@ def test_estimate_schedule():
 
 
 def test_still_frames_refine_where_the_error_is(bunny_store, monkeypatch):
-    """``Runtime.update``: the first frame measures its error on every pixel and pins nodes from the coarsest
-    bound until it meets the target (E-5); a still camera estimates no more; a moving one returns to E-4's bound,
-    drops the pins and estimates on E-2's grid every few frames; when it stops, E-5 on every pixel again."""
+    """``Runtime.update``: the first frame searches E-4's bound on E-2's grid (for the frames in motion), then
+    measures its error on every pixel and pins nodes from the coarsest bound until it meets the target (E-5); a
+    still camera estimates no more; a moving one returns to E-4's bound, drops the pins and estimates on the grid
+    every few frames; when it stops, E-5 on every pixel again."""
     from lodprt.runtime import frame_error
     from lodprt.runtime.camera import Camera, default_eye, scene_centre
     from lodprt.runtime.session import Runtime
@@ -160,26 +161,27 @@ def test_still_frames_refine_where_the_error_is(bunny_store, monkeypatch):
     monkeypatch.setattr(frame_error, "estimate", lambda *a, **k: calls.append(k["stride"]) or real_estimate(*a, **k))
     monkeypatch.setattr(frame_error, "pin", lambda *a, **k: calls.append("pin") or real_pin(*a, **k))
     rt = Runtime(bunny_store, device="cpu")
-    start = rt.error_bound  # E-4's starting bound, kept aside while the frame is pinned
     rt.set_lights(bunny_store.light_positions[4:5])
     c, e = np.array(scene_centre(bunny_store)), np.array(default_eye(bunny_store))
     cam = lambda k: Camera(eye=tuple(c + (e - c) * (1 - 0.01 * k)), target=tuple(c), width=640, height=480)  # noqa
+    grid = frame_error.coverage_stride(640, 480)
+    assert grid > 1
     rt.set_camera(cam(0))
     first = rt.update()
-    assert calls and set(calls) <= {"pin", 1} and "pin" in calls
+    assert calls[0] == grid and "pin" in calls and set(calls) <= {"pin", 1, grid}
+    motion = rt.motion_bound  # E-4's bound, searched first, kept aside while the frame is pinned
+    assert motion is not None and rt.steering.meets is not None
     assert first.stats["pinned_nodes"] > 0 and first.stats["estimate_stride_px"] == 1
     assert rt.estimated_psnr >= rt.target_psnr and rt.error_bound == frame_error.BOUND_RANGE[1]
     calls.clear()
     for _ in range(3):  # still: no estimate, the same cut
         frame = rt.update()
     assert calls == [] and len(frame.triangles) == len(first.triangles)
-    grid = frame_error.coverage_stride(640, 480)
-    assert grid > 1
     for k in range(1, 1 + 2 * frame_error.ESTIMATE_FRAMES):
         rt.set_camera(cam(k))
         frame = rt.update()
     assert calls and set(calls) == {grid} and frame.stats["pinned_nodes"] == 0
-    assert rt.motion_bound is None and start <= rt.error_bound < frame_error.BOUND_RANGE[1] or rt.error_bound < start
+    assert rt.motion_bound is None and rt.error_bound < frame_error.BOUND_RANGE[1]
     calls.clear()
     assert rt.update().stats["pinned_nodes"] > 0  # stopped
     assert calls[0] == "pin" and set(calls) <= {"pin", 1}

@@ -1,9 +1,11 @@
 """Per-node bounds the view cut reads every frame, made once per light sample (as ``lodprt.runtime.samples.
 SampleCache`` completes it) and white point: the T-14 coefficient boxes (e_lumi) and the S-2 detail bounds (the
-screen criterion), bottom-up over the vertex hierarchy (docs/RUNTIME.md)."""
+screen criterion), bottom-up over the vertex hierarchy (docs/RUNTIME.md); the S-3 error vectors; and
+``NodeErrors``, what the view cut's kernel gives per candidate node."""
 
 from __future__ import annotations
 
+import typing
 import weakref
 
 import numpy as np
@@ -215,3 +217,26 @@ def coefficient_boxes(h, c: np.ndarray, white: float, levels: list) -> np.ndarra
         out[rows, 0] = np.clip(0.5 * (mx[rows] + mn[rows]), -big, big).reshape(-1, C, n)
         out[rows, 1] = np.clip(0.5 * (mx[rows] - mn[rows]), 0, big).reshape(-1, C, n)
     return out
+
+
+class NodeErrors(typing.NamedTuple):
+    """Per candidate node (K,): culled (T-13 or outside the frustum), error (the criterion's, compared with the
+    bound), e_geo (error vector on screen over the diagonal, T-14), e_lumi (display spread of the leaves' radiance,
+    T-14), footprint (bounding-sphere radius on screen, pixels), e_detail (S-2: the radiance toward the eye that
+    completing the subtree from coarser vertices could miss, units of white). All 0 where culled."""
+
+    culled: np.ndarray
+    error: np.ndarray
+    e_geo: np.ndarray
+    e_lumi: np.ndarray
+    footprint: np.ndarray
+    e_detail: np.ndarray
+
+
+def scaled_error_vectors(h, deviation: np.ndarray) -> np.ndarray:
+    """S-3: (N, 3) float32 each node's error vector direction (its cone axis where the node's own vector is 0) at
+    length ``deviation`` (the subtree's accumulated deviation, ``node_bounds.subtree_deviation``)."""
+    own = np.asarray(h.error_vector, np.float64)
+    length = np.linalg.norm(own, axis=1)
+    unit = np.where(length[:, None] > 0, own / np.maximum(length, 1e-300)[:, None], h.cone_axis)
+    return np.ascontiguousarray(unit * deviation[:, None], np.float32)

@@ -35,6 +35,13 @@ class ErrorCache:
         self.stamp = np.full(num_nodes, -1, np.int32)
         self.refresh_all = True  # the next frame evaluates every candidate (set by jumps and new bounds)
 
+    def forget(self) -> None:
+        """Evaluate every candidate again, this frame's too (the kernel stops adding terms once a node's error is
+        over the bound, so an error cached under a much lower bound may be short of the node's error under a
+        higher one: E-5 moves the bound to the coarsest and back)."""
+        self.stamp[:] = -1
+        self.refresh_all = True
+
     def lookup(self, nodes: np.ndarray, bound: float, evaluate, coherent: bool) -> tuple[np.ndarray, np.ndarray]:
         """(culled, error) of ``nodes``, evaluating (``evaluate(nodes) -> (culled, error)``) those due this frame:
         all not evaluated this frame, or with ``coherent`` (converged, no jump) only the new, the stale, this

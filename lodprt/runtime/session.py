@@ -21,13 +21,13 @@ import logging
 import math
 import os
 import time
-import typing
 
 import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.launches import KernelThreads
 from lodprt.runtime import node_bounds
+from lodprt.runtime.node_bounds import NodeErrors, scaled_error_vectors
 from lodprt.runtime import frame_error
 from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
@@ -47,36 +47,14 @@ log = logging.getLogger(__name__)
 #: LIGHT_JUMP of their sum, counts as a jump
 JUMP = 0.1
 LIGHT_JUMP = 0.4
-#: E-5: rounds of pins on the first frame and a still one with a target_psnr (each converges the cut)
+#: E-4's rounds on the first frame with a target_psnr, and E-5's rounds of pins on it and a still one (each
+#: converges the cut)
 FIRST_ROUNDS = 12
 #: M-6: rounds of the first frame that refine along the actual light's shadow edges (each relights the cut and
 #: splits the nodes whose triangles straddle an edge by more than the bound)
 EDGE_ROUNDS = 24
 #: E-4: the relative change of the bound below which the steering keeps it
 STEER_STEP = 0.1
-
-class NodeErrors(typing.NamedTuple):
-    """Per candidate node (K,): culled (T-13 or outside the frustum), error (the criterion's, compared with the
-    bound), e_geo (error vector on screen over the diagonal, T-14), e_lumi (display spread of the leaves' radiance,
-    T-14), footprint (bounding-sphere radius on screen, pixels), e_detail (S-2: the radiance toward the eye that
-    completing the subtree from coarser vertices could miss, units of white). All 0 where culled."""
-
-    culled: np.ndarray
-    error: np.ndarray
-    e_geo: np.ndarray
-    e_lumi: np.ndarray
-    footprint: np.ndarray
-    e_detail: np.ndarray
-
-
-def scaled_error_vectors(h, deviation: np.ndarray) -> np.ndarray:
-    """S-3: (N, 3) float32 each node's error vector direction (its cone axis where the node's own vector is 0) at
-    length ``deviation`` (the subtree's accumulated deviation, ``node_bounds.subtree_deviation``)."""
-    own = np.asarray(h.error_vector, np.float64)
-    length = np.linalg.norm(own, axis=1)
-    unit = np.where(length[:, None] > 0, own / np.maximum(length, 1e-300)[:, None], h.cone_axis)
-    return np.ascontiguousarray(unit * deviation[:, None], np.float32)
-
 
 class Runtime:
     """Relighting and view-dependent LOD over one bake store, kept by the caller across frames.
@@ -458,11 +436,13 @@ class Runtime:
         due, still = self.schedule.begin(self.errors.frame, settle, jumped, self.steering)
         estimating = self.lod and self.target_psnr is not None and due
         pinning = estimating and (settle or still)
+        if pinning and settle:  # E-4 first: the bound the frames in motion start from
+            self._steer_rounds()
         if pinning or (not still and self.motion_bound is not None):  # E-5 from the coarsest bound; moving: E-4's
             self.motion_bound, self.error_bound = (self.motion_bound or self.error_bound, BOUND_RANGE[1]) \
                 if pinning else (None, self.motion_bound)
             self.refinement.pin(None)
-            self.errors.refresh_all = True
+            self.errors.forget()
         refined, coarsened, touched, passes = self._converge(10_000 if pinning else max_passes)
         t1 = time.perf_counter()
         vid, tri = self._cut_mesh()
@@ -505,6 +485,19 @@ class Runtime:
                      normals=np.take(self.normals, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
+
+    def _steer_rounds(self) -> None:
+        """E-4 on the first frame, on E-2's grid: converge, follow the light's shadow edges (M-6), estimate, until the
+        steering settles (at most FIRST_ROUNDS rounds): the bound the frames in motion start from."""
+        self._converge(10_000)
+        vid, tri = self._cut_mesh()
+        for _ in range(FIRST_ROUNDS):
+            vid, tri, coef = self._edge_rounds(vid, tri, (0, 0, 0, 0))[:3]
+            self.estimate_frame_error(vid, tri, coef)
+            if not self.refinement.dirty:
+                return
+            self._converge(10_000)
+            vid, tri = self._cut_mesh()
 
     def _pin_rounds(self, vid, tri, counts: tuple) -> tuple:
         """E-5 on the cut at the coarsest bound: split the nodes that carry the frame's error measured on every pixel
