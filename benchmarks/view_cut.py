@@ -129,9 +129,9 @@ def static_views(store, name: str, renderer, device: str, family: str = "shared"
     """Each of STATIC_SETTINGS, light on the middle sample, 400 x 300, from the default eye of ``lodprt compare``
     (``default_eye``: a three-quarter view from the front and above), a front view of the object and a close one
     (the full frame made once per view and light), each the first frame of a fresh Runtime, as ``lodprt render``
-    and ``compare`` draw it (the cut converged; under the default's target steered on every pixel, E-2):
+    and ``compare`` draw it (the cut converged; under the default's target refined where its error is, E-5):
     triangles against the full mesh, PSNR, its time and, for the default's rows, the frame's estimated PSNR (E-3:
-    how tight the estimate is, and whether it is ever optimistic) on every pixel, as a still frame steers, and on
+    how tight the estimate is, and whether it is ever optimistic) on every pixel, as a still frame is refined, and on
     the grid, as a moving one does. The default also with the light between samples (``between_lights``: the
     direct path, M-1..M-6)."""
     from lodprt.runtime.camera import Camera, default_eye, object_bounds, scene_centre
