@@ -23,6 +23,11 @@ from lodprt.devices import warp
 DEVICE = "cpu"
 #: a pass over fewer items runs as one launch (a launch costs tens of microseconds): ``KernelThreads``
 SPLIT_MIN = 8192
+#: the same for the run time's per-row passes (``KernelThreads.slices``' ``least``, one slice per thread), whose
+#: rows cost about a microsecond each (a node's view errors, a vertex's direct light with its shadow ray): two
+#: slices pay from about a thousand rows (benchmarks/runtime.py's orbit, 2 cores: the default's median frame 12.2-12.5
+#: ms, against 13.2-13.8 with SLICES per thread and 13.7-14.1 from SPLIT_MIN rows)
+ROWS_MIN = 1024
 #: slices of a pass per thread, at most (``KernelThreads.launch``)
 SLICES = 4
 
@@ -64,15 +69,17 @@ class KernelThreads:
         wp = warp()
         self.slices(lambda a, b: wp.launch(kernel, dim=b - a, device=DEVICE, inputs=[a] + inputs), dim, work)
 
-    def slices(self, run, dim: int, work: np.ndarray | None = None, most: int | None = None) -> None:
+    def slices(self, run, dim: int, work: np.ndarray | None = None, most: int | None = None,
+               least: int | None = None, per_thread: int = SLICES) -> None:
         """``run(a, b)`` over slices ``a:b`` of items ``0..dim-1`` of about equal ``work`` (cumulative (dim + 1,),
-        e.g. the corner CSR start; None: equal counts), ``SLICES`` per thread (each thread takes the next slice
-        when it is done with one: a core shared with another process does fewer); one slice below ``SPLIT_MIN``
-        items; with ``most``, no slice of more than ``most`` items (bounded per-slice buffers). ``run`` must write
-        only its own items' outputs (a Warp CPU launch on views of them, say)."""
+        e.g. the corner CSR start; None: equal counts), ``per_thread`` per thread (each thread takes the next slice
+        when it is done with one: a core shared with another process does fewer); one slice below ``least``
+        items (default SPLIT_MIN); with ``most``, no slice of more than ``most`` items (bounded per-slice
+        buffers). ``run`` must write only its own items' outputs (a Warp CPU launch on views of them, say)."""
         parts = 1
-        if self.pool is not None and dim >= SPLIT_MIN:
-            parts = min(SLICES * self.workers, max(self.workers, dim // SPLIT_MIN))
+        least = SPLIT_MIN if least is None else least
+        if self.pool is not None and dim >= least:
+            parts = min(max(int(per_thread), 1) * self.workers, max(self.workers, dim // max(int(least), 1)))
         if most is not None:
             parts = max(parts, -(-dim // max(int(most), 1)))
         if work is None:

@@ -267,3 +267,17 @@ def test_relit_any_vertex_is_what_the_full_mesh_frame_draws(bunny_bake):
     np.testing.assert_allclose(rad, ref[other], rtol=0, atol=1e-5 * float(np.abs(ref).max()))
     np.testing.assert_allclose(coef, ref_c[other], rtol=0, atol=1e-5 * float(np.abs(ref_c).max()))
     assert np.array_equal(rt.lighting.frame_lit, lit)
+
+
+@pytest.mark.parametrize("n, size", [(1, 0), (1, 5), (50, 300), (100_000, 90_000)])
+def test_distinct_ids_is_numpy_unique(n, size):
+    """``distinct_ids`` marks a table instead of sorting: the same ids and inverse as ``np.unique`` (the oracle)."""
+    from lodprt.runtime.frame_error import distinct_ids
+
+    values = np.random.default_rng(size).integers(0, n, (size, 3)) if size else np.zeros((0, 3), np.int64)
+    ids, inverse = distinct_ids(values, n)
+    want_ids, want_inverse = np.unique(values, return_inverse=True)
+    np.testing.assert_array_equal(ids, want_ids)
+    np.testing.assert_array_equal(inverse, want_inverse.ravel())
+    np.testing.assert_array_equal(ids[inverse].reshape(values.shape), values)
+

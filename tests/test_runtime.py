@@ -370,3 +370,22 @@ def test_light_radiance_without_a_runtime(store, bunny_floor, tmp_path):
     assert rad.shape == (plain.num_vertices, 3) and np.isfinite(rad).all() and rad.max() > 0
     with pytest.raises(LodprtError, match="hierarchy"):
         Runtime(plain)
+
+
+def test_sliced_rows_give_the_frame_of_one_launch(store, monkeypatch):
+    """The run time's per-row passes (view errors, relighting, E-2's rays) split over the cores from ROWS_MIN rows,
+    one slice per core, each launch writing only its own rows: a frame made with every pass split (ROWS_MIN 7) is
+    the frame of single launches, bit for bit (triangles, coefficients, radiance, the estimate)."""
+    from lodprt.runtime import session
+
+    frames = []
+    for least in (7, 1 << 30):
+        monkeypatch.setattr(session, "ROWS_MIN", least)
+        rt = Runtime(store, device="cpu", target_psnr=36.0)
+        assert rt._threads is not None and rt._threads.workers >= 1
+        frames.append(converge(rt, orbit_camera(rt, 0.7)))
+    a, b = frames
+    np.testing.assert_array_equal(a.triangles, b.triangles)
+    np.testing.assert_array_equal(a.coefficients, b.coefficients)
+    np.testing.assert_array_equal(a.radiance, b.radiance)
+    assert a.stats["estimated_psnr_db"] == b.stats["estimated_psnr_db"]

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from lodprt.errors import LodprtError
-from lodprt.launches import KernelThreads
+from lodprt.launches import ROWS_MIN, KernelThreads
 from lodprt.runtime import node_bounds
 from lodprt.runtime.node_bounds import NodeErrors, scaled_error_vectors
 from lodprt.runtime import frame_error
@@ -245,7 +245,8 @@ class Runtime:
 
     def launch_rows(self, kernel, rows: int, inputs: list, outputs: list) -> None:
         """Launch ``kernel`` over ``rows`` rows, each launch taking its first row as ``offset``: on the CPU in slices
-        over the cores (``lodprt.launches.KernelThreads``), one launch on a GPU."""
+        over the cores (``lodprt.launches.KernelThreads``: one slice per core from ROWS_MIN rows), one launch on a
+        GPU."""
         wp, dev = self._wp, self.device
 
         def run(a: int, b: int) -> None:
@@ -254,7 +255,7 @@ class Runtime:
         if self._threads is None:
             run(0, rows)
         else:
-            self._threads.slices(run, rows)
+            self._threads.slices(run, rows, least=ROWS_MIN, per_thread=1)
 
     def _frame_inputs(self) -> tuple:
         """The slots of the samples in use and every slot's RGB weight (0 for the others), on the device."""
@@ -438,9 +439,12 @@ class Runtime:
         pinning = estimating and (settle or still)
         if pinning and settle:  # E-4 first: the bound the frames in motion start from
             self._steer_rounds()
-        if pinning or (not still and self.motion_bound is not None):  # E-5 from the coarsest bound; moving: E-4's
-            self.motion_bound, self.error_bound = (self.motion_bound or self.error_bound, BOUND_RANGE[1]) \
-                if pinning else (None, self.motion_bound)
+        if pinning or (not still and self.motion_bound is not None):
+            if pinning:  # E-5 from the coarsest bound; E-4's bound is kept for the frames in motion
+                self.motion_bound = self.motion_bound or self.error_bound
+                self.error_bound = BOUND_RANGE[1]
+            else:  # moving again: E-4's bound back, the pins dropped
+                self.error_bound, self.motion_bound = self.motion_bound, None
             self.refinement.pin(None)
             self.errors.forget()
         refined, coarsened, touched, passes = self._converge(10_000 if pinning else max_passes)
@@ -511,7 +515,7 @@ class Runtime:
             self.refinement.pin(nodes)
             more = self._converge(10_000)
             counts = tuple(a + b for a, b in zip(counts, more))
-            if not more[0]:  # no node could split
+            if not more[0] and not more[1]:  # the cut did not move: no pinned node could split
                 return vid, tri, coef, rad, counts
             vid, tri = self._cut_mesh()
         self.estimate_frame_error(vid, tri, every_pixel=True, steer=False)  # E-3 of the cut drawn
