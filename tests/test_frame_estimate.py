@@ -269,9 +269,10 @@ def test_relit_any_vertex_is_what_the_full_mesh_frame_draws(bunny_bake):
     assert np.array_equal(rt.lighting.frame_lit, lit)
 
 
-@pytest.mark.parametrize("n, size", [(1, 0), (1, 5), (50, 300), (100_000, 90_000)])
+@pytest.mark.parametrize("n, size", [(1, 0), (1, 5), (50, 300), (100_000, 90_000), (1_000_000, 1_000)])
 def test_distinct_ids_is_numpy_unique(n, size):
-    """``distinct_ids`` marks a table instead of sorting: the same ids and inverse as ``np.unique`` (the oracle)."""
+    """``distinct_ids`` marks a table instead of sorting (or sorts, for few values of many ids): the same ids and
+    inverse as ``np.unique`` (the oracle)."""
     from lodprt.runtime.frame_error import distinct_ids
 
     values = np.random.default_rng(size).integers(0, n, (size, 3)) if size else np.zeros((0, 3), np.int64)

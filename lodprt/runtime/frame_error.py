@@ -277,9 +277,13 @@ def reference(rt, stride: int | None) -> Reference:
 
 def distinct_ids(values: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """``np.unique(values, return_inverse=True)`` of ids in ``[0, n)``: (the distinct ids ascending (K,) int64,
-    ``values``' rows among them, flat), by marking a table of ``n`` instead of sorting (a frame's hits: a
-    sort of 3 per ray costs more than a pass over the vertices)."""
+    ``values``' rows among them, flat), by marking a table of ``n`` instead of sorting when there are at least
+    n / 16 values (every pixel's hits: sorting 3 per ray costs more than a pass over the vertices; a grid's few
+    rays on a huge mesh are sorted)."""
     flat = np.asarray(values, np.int64).ravel()
+    if 16 * len(flat) < n:
+        ids, inverse = np.unique(flat, return_inverse=True)
+        return ids, inverse.ravel()
     mark = np.zeros(n, bool)
     mark[flat] = True
     ids = np.flatnonzero(mark)

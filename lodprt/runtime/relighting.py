@@ -54,6 +54,7 @@ class Relighting:
         self.frame_lit = None  # which lights reach each vertex of the last relight_vertices (M-6), or None
         self._vis = None  # device copy of the samples' visibility and the cache version it holds
         self._vis_version = -1
+        self._bracket = None  # bracket_mask of the current lights, and the cache version it was made for
 
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each);
@@ -69,6 +70,7 @@ class Relighting:
         self.weights = W
         self.used_samples = np.flatnonzero(np.abs(W).sum(1) > 0)
         self.used_slots = self.samples.ensure(self.used_samples)  # completes the samples not held yet (T-15)
+        self._bracket = None
 
     def watch_eye(self, camera):
         """``camera``, its eye checked against the scene's closed objects (one warning for the first inside)."""
@@ -88,11 +90,16 @@ class Relighting:
 
     def bracket_mask(self) -> np.ndarray:
         """(slots,) int32: 1 for the cache slots of the samples around each light (``bracketing``), whose S-2
-        detail the direct path's view cut takes at full weight (M-5)."""
+        detail the direct path's view cut takes at full weight (M-5). Made once for the lights and the cache's
+        slots (a frame's view errors ask for it on every pass)."""
+        if self._bracket is not None and self._bracket[0] == self.samples.version:
+            return self._bracket[1]
         mask = np.zeros(max(self.samples.slots, 1), np.int32)
         near = bracketing(self.interp.samples, self.positions, self.light_samples, self.light_weights)
         chosen = self.slot_of_sample()[self.light_samples[near]]
         mask[chosen[chosen >= 0]] = 1
+        mask.flags.writeable = False  # shared by the calls until the lights or the slots change
+        self._bracket = (self.samples.version, mask)
         return mask
 
     def visibility_array(self):
