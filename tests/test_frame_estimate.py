@@ -281,4 +281,3 @@ def test_distinct_ids_is_numpy_unique(n, size):
     np.testing.assert_array_equal(ids, want_ids)
     np.testing.assert_array_equal(inverse, want_inverse.ravel())
     np.testing.assert_array_equal(ids[inverse].reshape(values.shape), values)
-
