@@ -17,7 +17,10 @@ lights; per floor, in the same run, the full-resolution GI bake, the LOD bake wi
 the full bake's, gathering vertices per pass and the rel-RMSE of the completed radiance against the full bake (all
 vertices, the bunny's, the floor's). The full bake and every cut run ``--repeats`` rounds, interleaved (this
 machine's speed drifts by 10-20 % between minutes): times are medians, the ratio is the median of the rounds' ratios
-with its least and largest beside it; the bakes are seeded, so every round's values must agree (checked).
+with its least and largest beside it; the bakes are seeded, so every round's values must agree (checked). Then, per
+floor, G-9's stated error against the error it leaves on one indirect pass (``estimate_check``: 1 bounce, the
+tolerances and 0.003; per light sample, the RMS difference of the LOD and full completed radiance against
+``tau L_rms``, and how much of it lies where the full pass gathers no light at all).
 Writes benchmarks/results/gi-floors[-quick].json.
 """
 
@@ -37,6 +40,8 @@ from mitsuba_ref import mitsuba_image, psnr, require_mitsuba
 KD = 0.8
 #: the light of the Mitsuba comparison and the camera (scene units of the bunny, about 0.15 across)
 MITSUBA_LIGHT = (0.09, 0.30, 0.12)
+#: the least tolerance of the floor sweep's check of G-9's stated error (``estimate_check``), below the sweep's
+CHECK_TOLERANCE = 0.003
 EYE, TARGET, FOV = (-0.05, 0.16, 0.32), (-0.02, 0.07, 0.0), 40.0
 
 
@@ -116,7 +121,7 @@ def floor_sweep(args) -> list[dict]:
     from lodprt.model.hierarchy_build import build_hierarchy
     from lodprt.precompute.bake import bake
 
-    rows = []
+    rows, checks = [], []
     for floor in args.floors:
         scene = gi_scene(floor, (1, 1, 1) if args.quick else (2, 1, 2))
         tree = build_hierarchy(scene.positions, scene.faces, scene.normals)
@@ -147,6 +152,7 @@ def floor_sweep(args) -> list[dict]:
                           f"{lod.bake_seconds:.2f} s ({lod.bake_seconds / full_s[-1]:.3f}), {errors['gathered']:,} "
                           f"gathered, LOD vs full {errors['lod_vs_full']:.4f} (bunny {errors['bunny_part']:.4f}, "
                           f"floor {errors['floor_part']:.4f})", flush=True)
+            checks += estimate_check(scene, floor, sorted({CHECK_TOLERANCE, *args.tolerances}), common, tmp)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         for i, (cut, _kw, value) in enumerate(cuts):
@@ -155,12 +161,42 @@ def floor_sweep(args) -> list[dict]:
                          "full_s": float(np.median(full_s)), "lod_s": float(np.median(lod_s[i])),
                          "ratio": float(np.median(ratios)), "ratio_min": float(ratios.min()),
                          "ratio_max": float(ratios.max()), "rounds": args.repeats, **found[i]})
-    return rows
+    return rows, checks
+
+
+def estimate_check(scene, floor: int, tolerances, common: dict, tmp: Path) -> list[dict]:
+    """G-9's stated error against the error it leaves, on the first indirect pass (1 bounce): per tolerance and
+    light sample, the RMS difference of the completed radiance of the LOD and the full bake (the direct term is
+    the same in both, so it is the pass' error) over the referenced vertices, against what G-9 states for the
+    pass, ``tau L_rms`` (L_rms the RMS of the sample's direct radiance), and the share of the squared error on the
+    vertices the full pass gives no indirect light at all."""
+    from lodprt.precompute.bake import bake
+
+    one = {**common, "bounces": 1}
+    bake(scene, tmp / "direct.zarr", threshold_deg=None, **{**common, "bounces": 0})
+    direct = completed(tmp / "direct.zarr", scene.referenced)
+    bake(scene, tmp / "full1.zarr", threshold_deg=None, **one)
+    full = completed(tmp / "full1.zarr", scene.referenced)
+    dark = full == direct  # (S, V'): no indirect light reaches the vertex in the full pass
+    l_rms = np.sqrt(np.mean(direct**2, axis=1))
+    out = []
+    for tol in tolerances:
+        bake(scene, tmp / "lod1.zarr", threshold_deg=0.0, indirect_tolerance=tol, **one)
+        d2 = (completed(tmp / "lod1.zarr", scene.referenced) - full) ** 2
+        actual = np.sqrt(d2.mean(axis=1))
+        ratio = actual / (tol * l_rms)
+        out.append({"floor": floor, "tolerance": tol, "stated_max": float((tol * l_rms).max()),
+                    "actual_max": float(actual.max()), "over_min": float(ratio.min()), "over_max": float(ratio.max()),
+                    "dark_share": float((d2 * dark).sum() / max(d2.sum(), 1e-300))})
+        r = out[-1]
+        print(f"  floor {floor} G-9 {tol}: first pass' RMS error {r['over_min']:.2f}-{r['over_max']:.2f} x the "
+              f"stated tau L_rms, {r['dark_share']:.0%} of it where the full pass is dark", flush=True)
+    return out
 
 
 def floors_main(args) -> None:
     args.floors = [20, 40] if args.quick else [60, 200, 400]
-    rows = floor_sweep(args)
+    rows, checks = floor_sweep(args)
     print(table(rows, [("floor", "floor", "d"), ("vertices", "vertices", ",d"), ("cut", "cut", "s"),
                        ("setting", "setting", "g"), ("full_s", "full s", ".2f"), ("lod_s", "LOD s", ".2f"),
                        ("ratio", "LOD/full", ".3f"), ("ratio_min", "min", ".3f"), ("ratio_max", "max", ".3f"),
@@ -173,7 +209,10 @@ def floors_main(args) -> None:
                             "indirect_threshold_deg": args.indirect_threshold_deg, "tolerances": args.tolerances,
                             "lights": "1 x 1 x 1" if args.quick else "2 x 1 x 2", "kd": KD,
                             "rounds": args.repeats},
-               "rows": rows}
+               "rows": rows, "estimate_check": checks}
+    print(table(checks, [("floor", "floor", "d"), ("tolerance", "G-9", "g"), ("stated_max", "stated RMS (max)", ".4g"),
+                         ("actual_max", "actual RMS (max)", ".4g"), ("over_min", "actual / stated min", ".2f"),
+                         ("over_max", "max", ".2f"), ("dark_share", "share where the full pass is dark", ".2f")]))
     print("wrote", write(name, results, args.json))
 
 
@@ -294,9 +333,9 @@ def main():
                    "of 60, 200 and 400, 2 bounces, default rays (gi-floors.json)")
     p.add_argument("--repeats", type=int, default=3, help="floor sweep: rounds of the full bake and every cut, "
                    "interleaved; medians reported (default 3)")
-    p.add_argument("--tolerances", type=float, nargs="+", default=[0.01, 0.015, 0.02, 1.0],
-                   help="G-9 tolerances of the floor sweep (default 0.01 0.015 0.02 1; 1 is the coarsest cut: the "
-                   "cost of everything but the gathering)")
+    p.add_argument("--tolerances", type=float, nargs="+", default=[0.01, 0.0125, 0.015, 0.02, 1.0],
+                   help="G-9 tolerances of the floor sweep (default 0.01 0.0125 0.015 0.02 1; 1 is the coarsest cut: "
+                   "the cost of everything but the gathering)")
     args = p.parse_args()
     from lodprt.devices import resolve_device
     from lodprt.model.hierarchy_build import build_hierarchy

@@ -264,6 +264,14 @@ def gi_floors(r: dict) -> str:
                "LOD vs full", "bunny part", "floor part"], rows)
 
 
+def gi_estimate(r: dict) -> str:
+    rows = [[n(row["floor"]), g(row["tolerance"]), g(row["stated_max"]), g(row["actual_max"]),
+             f"{row['over_min']:.2f}-{row['over_max']:.2f}", f"{100 * row['dark_share']:.0f} %"]
+            for row in r.get("estimate_check", [])]
+    return md(["floor", "G-9 tolerance", "stated RMS (largest sample)", "actual RMS (largest sample)",
+               "actual / stated (samples)", "of the squared error where the full pass is dark"], rows)
+
+
 def gi_mitsuba(r: dict) -> str:
     m = r["mitsuba"]
     names = {"direct": "direct only", "gi_full": "2 bounces, 128 rays, full resolution",
@@ -380,6 +388,7 @@ TABLES = {
     "gi": ("gi", gi),
     "gi_mitsuba": ("gi", gi_mitsuba),
     "gi_floors": ("gi-floors", gi_floors),
+    "gi_estimate": ("gi-floors", gi_estimate),
     "volume": ("volume", volume),
     "neighbourhood": ("neighbourhood", neighbourhood),
     "environment_transfer": ("environment", environment_transfer),

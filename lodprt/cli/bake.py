@@ -80,8 +80,9 @@ def register(sub) -> None:
                     help="light cut: choose where to gather per sample and pass by the indirect light itself "
                     "instead of --indirect-threshold-deg (G-9): refine from a coarse level of the hierarchy where "
                     "the gathered irradiance departs from its completion (T-15), within a budget: each pass' "
-                    "completed radiance within TAU times the RMS direct radiance (RMS over the vertices) of "
-                    "gathering at every vertex (e.g. 0.01; in (0, 1]; default: off; docs/GI.md)")
+                    "estimated error against gathering at every vertex within TAU times the RMS direct radiance "
+                    "(RMS over the vertices); the actual error runs up to 2 times that at 0.01-0.02, more at smaller "
+                    "TAU (e.g. 0.01; in (0, 1]; default: off; docs/GI.md)")
     b.add_argument("--compress", default="none", metavar="CODEC",
                    help="store the light samples with a lossy codec (format version 2, docs/FORMAT.md): none "
                    "(default, float32), f16, q8, q10, q12 (integers per vertex and SH band) or "

@@ -66,7 +66,8 @@ class GISettings:
     mean radiance is below ``threshold`` times the direct term's; rays: gathering rays per vertex and pass;
     indirect_threshold_deg: angle of the indirect cut (G-5; None gathers at every vertex the light cut keeps);
     seed: of the per-vertex rotations of the ray set; indirect_tolerance: when set, the error-driven indirect cut
-    (G-9) replaces G-5: the RMS error each pass may leave over the vertices, relative to the RMS direct radiance.
+    (G-9) replaces G-5: the RMS error each pass' estimates may leave over the vertices, relative to the RMS direct
+    radiance (the actual error is larger: docs/GI.md).
     """
 
     bounces: int = 0
