@@ -168,6 +168,44 @@ def test_cut_is_legal_after_every_update(store):
     assert touched[0] > 5 * np.median(touched[1:])  # later frames touch what changed, not the whole cut
 
 
+def test_frame_mesh_follows_the_cut_and_is_the_callers(store):
+    """A frame's mesh is the cut's, from the reference triangulation, whether the cut moved (camera steps) or not
+    (LOD off, lights moving: the mesh made once is kept); a frame's arrays are the caller's own (changing one changes
+    no later frame)."""
+    from lodprt.model.hierarchy import triangulate
+
+    def rows(t):  # a triangle list in a canonical order: corners sorted, then the rows
+        t = np.sort(t, axis=1)
+        return t[np.lexsort(t.T[::-1])]
+
+    def reference(r):
+        vid = np.sort(r.h.vertex[r.cut.nodes])
+        return vid[r.store.referenced[vid]], rows(triangulate(r.h, r.faces, r.cut.anc))
+
+    box = np.asarray(store.root["lights"].attrs["box"])
+    for lod in (True, False):
+        r = Runtime(store, lod=lod)
+        frames = []
+        for i in range(4):
+            r.set_camera(orbit_camera(r, 0.3 * (i % 3) if lod else 0.1))  # the cut moves, and comes back
+            r.set_lights([box[:3] + (box[3:] - box[:3]) * np.array([0.3 + 0.1 * i, 0.5, 0.5])])
+            f = r.update(max_passes=10_000)
+            vid, tri = reference(r)
+            np.testing.assert_array_equal(f.vertex_ids, vid)
+            np.testing.assert_array_equal(rows(f.vertex_ids[f.triangles]), tri)
+            frames.append(f)
+        first = frames[0].vertex_ids.copy()
+        frames[0].vertex_ids[:] = 0
+        frames[0].triangles[:] = 0
+        again = r.update()  # a still frame (LOD on: E-5 refines it)
+        vid, tri = reference(r)
+        np.testing.assert_array_equal(again.vertex_ids, vid)
+        np.testing.assert_array_equal(rows(again.vertex_ids[again.triangles]), tri)
+        if not lod:
+            np.testing.assert_array_equal(again.vertex_ids, first)
+            np.testing.assert_array_equal(again.triangles, frames[-1].triangles)
+
+
 def test_zero_error_bound_refines_everything_visible(store):
     """With error bound 0 every active internal node is culled or has zero error (to float32 rounding): the visible
     mesh is at full resolution."""

@@ -146,6 +146,7 @@ class Runtime:
         self.refinement = CutRefinement(h, cut, self.device, self.max_passes)
         self.errors = ErrorCache(h.num_nodes)
         self._tri = IncrementalTriangulation(h, self.faces, self.device)  # T-3.2, what changed only
+        self._mesh: tuple | None = None  # (the cut's active ancestors, its vertices, its triangles): _cut_mesh
         self.camera: Camera | None = None
         self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
@@ -209,9 +210,7 @@ class Runtime:
     def _kernel_bounds(self, exact: bool) -> list:
         """The view_errors kernel's box_centre, box_half and detail arrays: the ones its criterion reads (the boxes
         too when ``exact``, which evaluates every term); a one-row placeholder, never indexed, for the others."""
-        need = set(self.criterion.NODE_BOUNDS)
-        if exact:
-            need |= {"box_centre", "box_half"}
+        need = set(self.criterion.NODE_BOUNDS) | ({"box_centre", "box_half"} if exact else set())
         if "placeholder" not in self._d:
             self._d["placeholder"] = self._wp.zeros((1, 1, 1, self.ncoef), dtype=self._wp.float16, device=self.device)
             self._d["placeholder_detail"] = self._wp.zeros((1, 1, 1), dtype=self._wp.float32, device=self.device)
@@ -290,8 +289,7 @@ class Runtime:
         and unread by a criterion without one)."""
         new = self.criterion.with_bound(error_bound)
         self.criterion = new if alpha is None else new.with_alpha(alpha)
-        self.refinement.dirty = True
-        self.errors.refresh_all = True
+        self.refinement.dirty = self.errors.refresh_all = True
 
     def set_lod(self, enabled: bool) -> None:
         """LOD off shows the full mesh (every leaf active); on starts again from the base mesh (no pins)."""
@@ -302,8 +300,7 @@ class Runtime:
     def set_lights(self, positions, colors=None) -> None:
         """Point lights at (L, 3) positions with (L, 3) RGB intensities (default: the bake's intensity each).
         Outside the sampled region: clamped with a warning, or an error (``outside``)."""
-        lit = self.lighting
-        old = lit.weights
+        lit, old = self.lighting, self.lighting.weights
         lit.set_lights(positions, colors)  # completes the samples not held yet (T-15)
         W = lit.weights
         self.refinement.dirty = True
@@ -383,13 +380,19 @@ class Runtime:
         return self.refinement.converge(self.errors, evaluate, self.error_bound, max_passes, enabled=self.lod)
 
     def _cut_mesh(self) -> tuple[np.ndarray, np.ndarray]:
-        """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut."""
-        h = self.h
+        """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut, read-only; kept
+        while the cut's active ancestors (which determine its nodes) stay: a still cut, the full mesh with LOD off."""
+        h, anc = self.h, self.cut.anc
+        if self._mesh is not None and np.array_equal(self._mesh[0], anc):
+            return self._mesh[1], self._mesh[2]
         vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
         vid = vid[self.store.referenced[vid]]  # a vertex no face uses is never drawn: not relit
         lut = np.full(h.num_vertices, -1, np.int32)
         lut[vid] = np.arange(len(vid), dtype=np.int32)
-        return vid, np.take(lut, self._tri.faces(self.cut.anc))
+        tri = np.take(lut, self._tri.faces(anc))
+        vid.flags.writeable = tri.flags.writeable = False
+        self._mesh = (anc.copy(), vid, tri)
+        return vid, tri
 
     def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, coefficients: np.ndarray | None = None, *,
                              steer: bool = True, every_pixel: bool = False) -> None:
@@ -485,7 +488,7 @@ class Runtime:
             "ms_cut": 1e3 * (t1 - t0 + steer), "ms_triangulate": 1e3 * (t2 - t1),
             "ms_relight": 1e3 * (t3 - t2 - steer), "ms_total": 1e3 * (t3 - t0),
         }
-        return Frame(vertex_ids=vid, positions=np.take(self.positions, vid, axis=0),
+        return Frame(vertex_ids=vid.copy(), positions=np.take(self.positions, vid, axis=0),
                      normals=np.take(self.normals, vid, axis=0), triangles=tri.astype(np.int32),
                      coefficients=coef, radiance=rad.astype(np.float32), lights=self.light_positions.copy(),
                      light_colors=self.light_colors.copy(), camera=self.camera, stats=stats, white=self.white)
@@ -506,10 +509,10 @@ class Runtime:
     def _pin_rounds(self, vid, tri, counts: tuple) -> tuple:
         """E-5 on the cut at the coarsest bound: split the nodes that carry the frame's error measured on every pixel
         (``frame_error.pin``) until it meets the target (at most FIRST_ROUNDS rounds). ``_edge_rounds``' tuple."""
+        self.estimate_stride = frame_error.ray_stride(self.camera.width, self.camera.height, 1)
         for _ in range(FIRST_ROUNDS):
             coef, rad = self._relight(vid)
             self.estimated_psnr, nodes = frame_error.pin(self, vid, tri, coef)
-            self.estimate_stride = frame_error.ray_stride(self.camera.width, self.camera.height, 1)
             if not len(nodes):
                 return vid, tri, coef, rad, counts
             self.refinement.pin(nodes)
