@@ -15,7 +15,10 @@ scene is made with numpy (trimesh's icosphere for the spheres, pymeshlab for the
   ridges: large flat-ish areas;
 * ``speck``: a small bumpy torus (0.05 across) on a floor 40 times its size: an object small on screen;
 * ``bunny-coarse``: the shipped Stanford bunny (tests/data) decimated by pymeshlab's quadric edge collapse to a
-  quarter of its faces: a decimated variant.
+  quarter of its faces: a decimated variant;
+* ``rough``: the bunny decimated to just under ``MAX_TRIANGLES`` faces, its vertices moved along their normals by
+  white Gaussian noise (``ROUGH_NOISE`` median edges): a raw scan's roughness, where the view cut must keep about a
+  triangle a pixel.
 
 Every closed shape (all but the bunny, which has holes in its base) is watertight and wound outward; each scene
 stays under ``MAX_TRIANGLES`` object triangles so a bake at the default settings takes seconds. ``scene_meshes``
@@ -36,6 +39,8 @@ COMB_FINS = 16
 FIN_WIDTH, FIN_HEIGHT, FIN_DEPTH = 0.0125, 0.5, 0.6
 COMB_BASE = (1.0, 0.08, 0.7)
 CROWD_OBJECTS = 24
+#: ``rough``: the standard deviation of its vertices' noise along their normals, in median edge lengths
+ROUGH_NOISE = 0.35
 
 
 def grid_box(lo, hi, n) -> tuple[np.ndarray, np.ndarray]:
@@ -189,8 +194,8 @@ def speck(rng) -> dict:
     return {"objects": [("speck", on_ground(pos), faces)], "floor": (300, 20.0)}
 
 
-def bunny_coarse(rng) -> dict:
-    """The shipped bunny, decimated by pymeshlab's quadric edge collapse to a quarter of its faces."""
+def decimated_bunny(target: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """The shipped bunny decimated by pymeshlab's quadric edge collapse to ``target`` faces (None: a quarter)."""
     import pymeshlab
 
     from lodprt.model.scene import load_mesh
@@ -198,16 +203,32 @@ def bunny_coarse(rng) -> dict:
     pos, faces = load_mesh(Path(__file__).resolve().parents[1] / "tests" / "data" / "stanford-bunny.obj.xz")
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.asarray(pos, np.float64), np.asarray(faces, np.int32)))
-    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=len(faces) // 4, preservenormal=True,
+    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=target or len(faces) // 4, preservenormal=True,
                                                 preservetopology=True, optimalplacement=True)
     m = ms.current_mesh()
-    return {"objects": [("bunny-coarse", m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64))],
-            "floor": (200, 1.0)}
+    return m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
+
+
+def bunny_coarse(rng) -> dict:
+    """The shipped bunny, decimated by pymeshlab's quadric edge collapse to a quarter of its faces."""
+    return {"objects": [("bunny-coarse", *decimated_bunny(None))], "floor": (200, 1.0)}
+
+
+def rough(rng) -> dict:
+    """The shipped bunny decimated by pymeshlab to ``MAX_TRIANGLES`` faces, each vertex then moved along its normal
+    by Gaussian noise of ``ROUGH_NOISE`` median edges (white: no two neighbours alike): a raw scan's roughness."""
+    import trimesh
+
+    pos, faces = decimated_bunny(MAX_TRIANGLES - 1_000)
+    mesh = trimesh.Trimesh(pos, faces, process=False)
+    step = ROUGH_NOISE * float(np.median(mesh.edges_unique_length))
+    pos = pos + mesh.vertex_normals * rng.normal(0.0, step, (len(pos), 1))
+    return {"objects": [("rough", pos, faces)], "floor": (200, 1.0)}
 
 
 #: scene name -> builder(rng) -> {"objects": [(name, positions, faces)], "floor": (resolution, margin)}
 SCENES = {"comb": comb, "relief": relief, "crowd": crowd, "terrain": terrain, "speck": speck,
-          "bunny-coarse": bunny_coarse}
+          "bunny-coarse": bunny_coarse, "rough": rough}
 #: the scenes whose every object is closed (watertight and wound outward)
 CLOSED = ("comb", "relief", "crowd", "terrain", "speck")
 

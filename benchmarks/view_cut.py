@@ -19,7 +19,7 @@ also with the light halfway between two samples and at the centre of four (``bet
 
 ``--scenes procedural`` (or ``all``, the default of the full run) also measures the static views on the procedural
 and decimated scenes of ``benchmarks/procedural.py`` (thin fins, fine relief, a crowd of sizes, terrain, a speck on
-a wide floor, the decimated bunny; seed 0, each with its own floor), generated into the run's temporary folder;
+a wide floor, the decimated bunny, a rough scan; seed 0, each with its own floor), generated into the run's temporary folder;
 the orbit sweeps stay on the shared models. Every static row names its scene and ``family`` (``shared`` or
 ``procedural``); ``static_summary`` gives, per criterion, the worst PSNR and the least "x fewer" over every scene
 and view (the issue's bar: at least 35 dB with at least 4x fewer triangles). ``--quick`` is the bunny alone

@@ -103,6 +103,23 @@ def test_registry_is_consistent():
     assert ThesisCriterion(0.25, alpha=0.3).describe() == "thesis criterion, error bound 0.25, alpha 0.30"
 
 
+def test_measured_frames_hold_geometry_at_the_default_rate():
+    """S-1's geometric rate: a steered criterion's bound per pixel tolerance in motion (the geometric error held at
+    pixel_tolerance pixels whatever the bound), the default bound's on E-5's measured still frame (as a fixed
+    bound's); a fixed bound's rate and T-14's inputs do not depend on it."""
+    from lodprt.runtime.criteria import PIXEL_TOLERANCE, SCREEN_BOUND
+
+    for bound in (0.05, 0.8, 8.0):
+        steered = ScreenCriterion(bound, target_psnr=36.0)
+        assert steered.kernel_inputs(400, 300)[1] == pytest.approx(bound / PIXEL_TOLERANCE)
+        assert steered.kernel_inputs(400, 300, True)[1] == pytest.approx(SCREEN_BOUND / PIXEL_TOLERANCE)
+        fixed = ScreenCriterion(bound)
+        assert fixed.kernel_inputs(400, 300, True) == fixed.kernel_inputs(400, 300, False)
+        assert fixed.kernel_inputs(400, 300)[1] == pytest.approx(SCREEN_BOUND / PIXEL_TOLERANCE)
+        thesis = ThesisCriterion(bound, alpha=0.3)
+        assert thesis.kernel_inputs(400, 300, True) == thesis.kernel_inputs(400, 300) == (thesis.MODE, 1.0, 1.0, 0.3)
+
+
 def parse(*argv):
     from lodprt.cli import args as cli_args
     from lodprt.cli.main import build_parser

@@ -20,6 +20,7 @@ EXPECTED = {
     "crowd": 8 * 20 * 4 ** 3 + 8 * 4 * 3 * 36 + 8 * 2 * 48 * 16,
     "terrain": 4 * (100 * 1 + 1 * 100 + 100 * 100),
     "speck": 2 * 160 * 32,
+    "rough": procedural.MAX_TRIANGLES - 1_000,
 }
 
 
@@ -84,6 +85,23 @@ def test_bunny_coarse_is_a_quarter_of_the_bunny_and_outward(scenes):
     _, pos, coarse = scenes["bunny-coarse"]["objects"][0]
     assert abs(len(coarse) - len(faces) // 4) <= 0.01 * len(faces)
     assert signed_volume(pos, coarse) > 0  # open (holes in its base) but wound outward
+
+
+def test_rough_is_thedecimated_bunny_moved_along_its_normals(scenes):
+    """``rough``: the bunny decimated to just under MAX_TRIANGLES (pymeshlab, the same faces), each vertex moved
+    along its normal (nothing tangential) by white noise whose spread is ROUGH_NOISE median edges; wound outward."""
+    import trimesh
+
+    _, pos, faces = scenes["rough"]["objects"][0]
+    base_pos, base_faces = procedural.decimated_bunny(procedural.MAX_TRIANGLES - 1_000)
+    np.testing.assert_array_equal(faces, base_faces)
+    base = trimesh.Trimesh(base_pos, base_faces, process=False)
+    move = pos - base_pos
+    along = np.einsum("ij,ij->i", move, base.vertex_normals)
+    np.testing.assert_allclose(move, along[:, None] * base.vertex_normals, atol=1e-12)
+    step = procedural.ROUGH_NOISE * np.median(base.edges_unique_length)
+    assert abs(along.std() / step - 1) < 0.03 and abs(along.mean()) < 0.03 * step
+    assert signed_volume(pos, faces) > 0
 
 
 def test_fins_are_thin(scenes):

@@ -206,6 +206,40 @@ def test_frame_mesh_follows_the_cut_and_is_the_callers(store):
             np.testing.assert_array_equal(again.triangles, frames[-1].triangles)
 
 
+def test_still_frames_hold_geometry_at_the_default_rate(store):
+    """S-1's geometric term as the run time evaluates it: on E-5's still frame (every pixel measured) at the default
+    bound's rate, SCREEN_BOUND / pixel_tolerance per pixel, not the coarsest bound's (ten times it); in motion at the
+    steered bound's, so that the geometric error stays at pixel_tolerance pixels. The kernel's error is the largest
+    of the geometric term and S-2's, so it is at least the term at the rate in force, and below it at the other for
+    some nodes."""
+    import math
+
+    from lodprt.runtime.criteria import PIXEL_TOLERANCE, SCREEN_BOUND
+
+    r = Runtime(store)
+    r.set_camera(orbit_camera(r, 0.4))
+    r.update()  # the first frame: E-5, a still frame
+
+    def terms(rate):
+        act = np.flatnonzero(r.cut.active)
+        nodes = act[act >= r.h.num_vertices]
+        ne = r.node_errors(nodes, exact=True)
+        seen = ~ne.culled & (ne.e_geo > 0)
+        geo = ne.e_geo[seen] * math.hypot(320, 240) * rate / PIXEL_TOLERANCE
+        return ne.error[seen], geo
+
+    assert r.motion_bound is not None
+    err, geo = terms(SCREEN_BOUND)
+    assert len(err) and np.all(err >= geo * (1 - 1e-4))
+    err, geo = terms(r.error_bound)  # the coarsest bound E-5 draws at: a rate ten times the default's
+    assert r.error_bound > 2 * SCREEN_BOUND and np.any(err < geo * 0.99)
+    r.set_camera(orbit_camera(r, 0.5))
+    r.update()  # in motion: E-4's bound back, geometry at its rate
+    assert r.motion_bound is None
+    err, geo = terms(r.error_bound)
+    assert len(err) and np.all(err >= geo * (1 - 1e-4))
+
+
 def test_zero_error_bound_refines_everything_visible(store):
     """With error bound 0 every active internal node is culled or has zero error (to float32 rounding): the visible
     mesh is at full resolution."""

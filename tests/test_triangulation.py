@@ -22,15 +22,21 @@ def rows(tri: np.ndarray) -> np.ndarray:
 
 def test_incremental_faces_match_the_reference(bunny_floor, bunny_hierarchy, device):
     """Random forced splits and collapses, several cut moves between calls, an unchanged call, LOD off (every leaf)
-    and back to the base: every call gives exactly ``triangulate``'s faces (same orientation, no duplicates)."""
+    and back to the base: every call gives exactly ``triangulate``'s faces (same orientation, no duplicates), and
+    ``update`` reports a move exactly when the active ancestors changed."""
     h, faces = bunny_hierarchy, bunny_floor.faces
     tri = IncrementalTriangulation(h, faces, device)
     rng = np.random.default_rng(3)
     cut = Cut.base(h, faces)
+    seen = None
     for step in range(8):
-        got = tri.faces(cut.anc)
+        # update says whether any active ancestor moved since the last call (the cache key of Runtime._cut_mesh)
+        assert tri.update(cut.anc) == (seen is None or not np.array_equal(seen, cut.anc))
+        seen = cut.anc.copy()
+        got = tri.faces(cut.anc) if step % 2 else tri.faces()
         np.testing.assert_array_equal(rows(got), rows(triangulate(h, faces, cut.anc)))
         if step == 3:  # nothing moved: the same faces again
+            assert not tri.update(cut.anc)
             np.testing.assert_array_equal(rows(tri.faces(cut.anc)), rows(got))
         act = np.flatnonzero(cut.active)
         inner = act[act >= h.num_vertices]

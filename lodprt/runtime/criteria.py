@@ -90,8 +90,9 @@ class Criterion:
         """Whether the run time steers the bound toward a frame target (E-4)."""
         return False
 
-    def kernel_inputs(self, width: int, height: int) -> tuple[int, float, float, float]:
-        """``view_errors``' (criterion, geo_rate, area_ref, alpha) for a ``width`` x ``height`` screen."""
+    def kernel_inputs(self, width: int, height: int, measured: bool = False) -> tuple[int, float, float, float]:
+        """``view_errors``' (criterion, geo_rate, area_ref, alpha) for a ``width`` x ``height`` screen; ``measured``:
+        the frame's error is measured on every pixel (E-5's still frame), not bounded node by node."""
         raise NotImplementedError
 
     def describe(self) -> str:
@@ -167,10 +168,13 @@ class ScreenCriterion(Criterion):
     def steered(self) -> bool:
         return self.target_psnr is not None
 
-    def geo_rate(self) -> float:
+    def geo_rate(self, measured: bool = False) -> float:
         """S-1: units of white per pixel of geometric error (the default bound per pixel tolerance; with a
-        target_psnr the steered bound's, so that the geometric error stays at pixel_tolerance pixels)."""
-        bound = self.error_bound if self.target_psnr is not None else SCREEN_BOUND
+        target_psnr the steered bound's, so that the geometric error stays at pixel_tolerance pixels in motion). On
+        E-5's still frame (``measured``: every pixel's error measured against the full mesh, and the nodes carrying
+        it split) the default bound's again: geometry the measurement sees is refined where it errs, and geometry it
+        cannot see (hidden, behind the object) is not held at pixel_tolerance pixels for nothing."""
+        bound = self.error_bound if self.target_psnr is not None and not measured else SCREEN_BOUND
         return max(bound, 1e-12) / self.pixel_tolerance
 
     @staticmethod
@@ -178,8 +182,8 @@ class ScreenCriterion(Criterion):
         """S-1: the pixels a node may cover before its shading term grows (AREA_SHARE of the screen)."""
         return AREA_SHARE * width * height
 
-    def kernel_inputs(self, width: int, height: int) -> tuple[int, float, float, float]:
-        return self.MODE, self.geo_rate(), self.area_ref(width, height), ThesisCriterion.alpha  # alpha unread
+    def kernel_inputs(self, width: int, height: int, measured: bool = False) -> tuple[int, float, float, float]:
+        return self.MODE, self.geo_rate(measured), self.area_ref(width, height), ThesisCriterion.alpha  # alpha unread
 
 
 @dataclasses.dataclass(frozen=True)
@@ -208,7 +212,7 @@ class ThesisCriterion(Criterion):
     def with_alpha(self, alpha: float) -> "Criterion":
         return dataclasses.replace(self, alpha=alpha)
 
-    def kernel_inputs(self, width: int, height: int) -> tuple[int, float, float, float]:
+    def kernel_inputs(self, width: int, height: int, measured: bool = False) -> tuple[int, float, float, float]:
         return self.MODE, 1.0, 1.0, self.alpha  # geo_rate and area_ref are S-1's, unread by T-14
 
     def describe(self) -> str:

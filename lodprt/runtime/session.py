@@ -146,7 +146,7 @@ class Runtime:
         self.refinement = CutRefinement(h, cut, self.device, self.max_passes)
         self.errors = ErrorCache(h.num_nodes)
         self._tri = IncrementalTriangulation(h, self.faces, self.device)  # T-3.2, what changed only
-        self._mesh: tuple | None = None  # (the cut's active ancestors, its vertices, its triangles): _cut_mesh
+        self._mesh: tuple | None = None  # (the cut's vertices, its triangles) as _tri last mapped them: _cut_mesh
         self.camera: Camera | None = None
         self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
@@ -244,8 +244,7 @@ class Runtime:
 
     def launch_rows(self, kernel, rows: int, inputs: list, outputs: list) -> None:
         """Launch ``kernel`` over ``rows`` rows, each launch taking its first row as ``offset``: on the CPU in slices
-        over the cores (``lodprt.launches.KernelThreads``: one slice per core from ROWS_MIN rows), one launch on a
-        GPU."""
+        over the cores (``lodprt.launches.KernelThreads``: a slice a core from ROWS_MIN rows), one launch on a GPU."""
         wp, dev = self._wp, self.device
 
         def run(a: int, b: int) -> None:
@@ -349,7 +348,8 @@ class Runtime:
             cam = self.camera
             used, weights = self._frame_inputs()
             bounds = self._kernel_bounds(exact)
-            mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height)
+            measured = self.motion_bound is not None  # E-5's still cut: its every pixel measured
+            mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height, measured)
             self.launch_rows(kr.view_errors, K, [
                 wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["positions"], d["vertex"],
                 d["children"], d["error_vector"], d["axis"], d["half"], d["radius"],
@@ -381,17 +381,17 @@ class Runtime:
 
     def _cut_mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut, read-only; kept
-        while the cut's active ancestors (which determine its nodes) stay: a still cut, the full mesh with LOD off."""
-        h, anc = self.h, self.cut.anc
-        if self._mesh is not None and np.array_equal(self._mesh[0], anc):
-            return self._mesh[1], self._mesh[2]
+        while no active ancestor moves (they make the cut's nodes): a still cut, the full mesh with LOD off."""
+        h = self.h
+        if not self._tri.update(self.cut.anc) and self._mesh is not None:
+            return self._mesh
         vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
         vid = vid[self.store.referenced[vid]]  # a vertex no face uses is never drawn: not relit
         lut = np.full(h.num_vertices, -1, np.int32)
         lut[vid] = np.arange(len(vid), dtype=np.int32)
-        tri = np.take(lut, self._tri.faces(anc))
+        tri = np.take(lut, self._tri.faces())
         vid.flags.writeable = tri.flags.writeable = False
-        self._mesh = (anc.copy(), vid, tri)
+        self._mesh = (vid, tri)
         return vid, tri
 
     def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, coefficients: np.ndarray | None = None, *,
@@ -535,11 +535,11 @@ class Runtime:
         for _ in range(EDGE_ROUNDS):
             more = self._converge(10_000)
             counts = tuple(a + b for a, b in zip(counts, more))
-            if more[0] == 0:
+            if not more[0] and not more[1]:
                 break
-            vid, tri = self._cut_mesh()
+            vid, tri = self._cut_mesh()  # the cut moved (collapses alone too): the frame draws the cut it leaves
             coef, rad = self._relight(vid)
-            if not self._shadow_edges(vid, tri, rad):
+            if not more[0] or not self._shadow_edges(vid, tri, rad):
                 break
         return vid, tri, coef, rad, counts
 

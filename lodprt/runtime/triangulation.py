@@ -34,19 +34,31 @@ class IncrementalTriangulation:
                        wp.full(F, -1, dtype=wp.int32, device=device),
                        wp.zeros(F, dtype=wp.int32, device=device), wp.zeros(1, dtype=wp.int32, device=device)]
 
-    def faces(self, anc: np.ndarray) -> np.ndarray:
-        """(M, 3) int32 original vertex ids of the non-degenerate faces for the active ancestors ``anc`` (V,)."""
+    def update(self, anc: np.ndarray) -> bool:
+        """Map again the faces around the vertices whose active ancestor in ``anc`` (V,) changed since the last call
+        (T-3.2); whether any did (False: the faces are the last call's)."""
         from lodprt.kernels import view_cut as kv
 
         wp = warp()
         anc = np.ascontiguousarray(anc, np.int32)
         moved = np.flatnonzero(anc != self._seen).astype(np.int32)
+        if not len(moved):
+            return False
+        self._seen[moved] = anc[moved]
+        a = wp.array(anc, dtype=wp.int32, device=self.device, copy=self.device != "cpu")
+        wp.launch(kv.retriangulate, dim=1, inputs=[wp.array(moved, dtype=wp.int32, device=self.device),
+                                                   *self._in, a, *self._state], device=self.device)
+        return True
+
+    def faces(self, anc: np.ndarray | None = None) -> np.ndarray:
+        """(M, 3) int32 original vertex ids of the non-degenerate faces for the active ancestors ``anc`` (V,) (None:
+        those of the last ``update``)."""
+        from lodprt.kernels import view_cut as kv
+
+        if anc is not None:
+            self.update(anc)
+        wp = warp()
         fmap, slot, live, count = self._state
-        if len(moved):
-            self._seen[moved] = anc[moved]
-            a = wp.array(anc, dtype=wp.int32, device=self.device, copy=self.device != "cpu")
-            wp.launch(kv.retriangulate, dim=1, inputs=[wp.array(moved, dtype=wp.int32, device=self.device),
-                                                       *self._in, a, *self._state], device=self.device)
         n = int(count.numpy()[0])
         if self.device == "cpu":  # the state is host memory: a numpy gather
             return np.take(fmap.numpy(), live.numpy()[:n], axis=0)  # np.take: faster than fancy indexing
