@@ -87,7 +87,7 @@ def test_bunny_coarse_is_a_quarter_of_the_bunny_and_outward(scenes):
     assert signed_volume(pos, coarse) > 0  # open (holes in its base) but wound outward
 
 
-def test_rough_is_thedecimated_bunny_moved_along_its_normals(scenes):
+def test_rough_is_the_decimated_bunny_moved_along_its_normals(scenes):
     """``rough``: the bunny decimated to just under MAX_TRIANGLES (pymeshlab, the same faces), each vertex moved
     along its normal (nothing tangential) by white noise whose spread is ROUGH_NOISE median edges; wound outward."""
     import trimesh

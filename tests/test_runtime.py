@@ -225,7 +225,7 @@ def test_still_frames_hold_geometry_at_the_default_rate(store):
         nodes = act[act >= r.h.num_vertices]
         ne = r.node_errors(nodes, exact=True)
         seen = ~ne.culled & (ne.e_geo > 0)
-        geo = ne.e_geo[seen] * math.hypot(320, 240) * rate / PIXEL_TOLERANCE
+        geo = ne.e_geo[seen] * math.hypot(r.camera.width, r.camera.height) * rate / PIXEL_TOLERANCE
         return ne.error[seen], geo
 
     assert r.motion_bound is not None
