@@ -41,6 +41,8 @@ COMB_BASE = (1.0, 0.08, 0.7)
 CROWD_OBJECTS = 24
 #: ``rough``: the standard deviation of its vertices' noise along their normals, in median edge lengths
 ROUGH_NOISE = 0.35
+#: ``rough``: the faces pymeshlab decimates the bunny to, just under MAX_TRIANGLES
+ROUGH_FACES = MAX_TRIANGLES - 1_000
 
 
 def grid_box(lo, hi, n) -> tuple[np.ndarray, np.ndarray]:
@@ -215,11 +217,11 @@ def bunny_coarse(rng) -> dict:
 
 
 def rough(rng) -> dict:
-    """The shipped bunny decimated by pymeshlab to ``MAX_TRIANGLES`` faces, each vertex then moved along its normal
+    """The shipped bunny decimated by pymeshlab to ``ROUGH_FACES`` faces, each vertex then moved along its normal
     by Gaussian noise of ``ROUGH_NOISE`` median edges (white: no two neighbours alike): a raw scan's roughness."""
     import trimesh
 
-    pos, faces = decimated_bunny(MAX_TRIANGLES - 1_000)
+    pos, faces = decimated_bunny(ROUGH_FACES)
     mesh = trimesh.Trimesh(pos, faces, process=False)
     step = ROUGH_NOISE * float(np.median(mesh.edges_unique_length))
     pos = pos + mesh.vertex_normals * rng.normal(0.0, step, (len(pos), 1))

@@ -20,7 +20,7 @@ EXPECTED = {
     "crowd": 8 * 20 * 4 ** 3 + 8 * 4 * 3 * 36 + 8 * 2 * 48 * 16,
     "terrain": 4 * (100 * 1 + 1 * 100 + 100 * 100),
     "speck": 2 * 160 * 32,
-    "rough": procedural.MAX_TRIANGLES - 1_000,
+    "rough": 59_000,
 }
 
 
@@ -88,12 +88,12 @@ def test_bunny_coarse_is_a_quarter_of_the_bunny_and_outward(scenes):
 
 
 def test_rough_is_the_decimated_bunny_moved_along_its_normals(scenes):
-    """``rough``: the bunny decimated to just under MAX_TRIANGLES (pymeshlab, the same faces), each vertex moved
+    """``rough``: the bunny decimated to ROUGH_FACES, just under MAX_TRIANGLES (pymeshlab, the same faces), each vertex moved
     along its normal (nothing tangential) by white noise whose spread is ROUGH_NOISE median edges; wound outward."""
     import trimesh
 
     _, pos, faces = scenes["rough"]["objects"][0]
-    base_pos, base_faces = procedural.decimated_bunny(procedural.MAX_TRIANGLES - 1_000)
+    base_pos, base_faces = procedural.decimated_bunny(procedural.ROUGH_FACES)
     np.testing.assert_array_equal(faces, base_faces)
     base = trimesh.Trimesh(base_pos, base_faces, process=False)
     move = pos - base_pos

@@ -206,6 +206,37 @@ def test_frame_mesh_follows_the_cut_and_is_the_callers(store):
             np.testing.assert_array_equal(again.triangles, frames[-1].triangles)
 
 
+def test_an_interrupted_frame_leaves_no_stale_mesh(store, monkeypatch):
+    """A frame interrupted while it makes the cut's mesh (KeyboardInterrupt: Ctrl-C in the viewer or a notebook),
+    after the triangulation took in the cut's move: the next frame of the same cut draws the cut's mesh, not the one
+    before the move (which ``Runtime._cut_mesh`` kept as current while nothing moved after). A fixed bound: no E-5
+    on the still frame, so the cut does not move again and only the cache could tell."""
+    from lodprt.model.hierarchy import triangulate
+
+    def rows(t):
+        t = np.sort(t, axis=1)
+        return t[np.lexsort(t.T[::-1])]
+
+    r = Runtime(store, criterion="screen", error_bound=0.8)
+    r.set_lights([store.light_positions[0]])
+    r.set_camera(orbit_camera(r, 0.0))
+    before = r.update(max_passes=10_000)
+    r.set_camera(orbit_camera(r, 0.8, dist=0.6))
+    faces = r._tri.faces
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(r._tri, "faces", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        r.update(max_passes=10_000)
+    monkeypatch.setattr(r._tri, "faces", faces)
+    after = r.update(max_passes=10_000)
+    assert after.stats["refined"] + after.stats["coarsened"] == 0  # the cut had moved in the interrupted frame
+    np.testing.assert_array_equal(rows(after.vertex_ids[after.triangles]), rows(triangulate(r.h, r.faces, r.cut.anc)))
+    assert len(after.triangles) != len(before.triangles)
+
+
 def test_still_frames_hold_geometry_at_the_default_rate(store):
     """S-1's geometric term as the run time evaluates it: on E-5's still frame (every pixel measured) at the default
     bound's rate, SCREEN_BOUND / pixel_tolerance per pixel, not the coarsest bound's (ten times it); in motion at the

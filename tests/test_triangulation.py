@@ -62,3 +62,34 @@ def test_gather_live_kernel(device):
                                              wp.array(fmap, dtype=wp.int32, ndim=2, device=device)],
               outputs=[out], device=device)
     np.testing.assert_array_equal(out.numpy(), fmap[live[:4]])
+
+
+@pytest.mark.parametrize("when", ["before", "after"])
+def test_an_interrupted_update_maps_again(bunny_floor, bunny_hierarchy, device, monkeypatch, when):
+    """An interruption (KeyboardInterrupt: Ctrl-C in a viewer or a notebook) just before or just after ``update``'s
+    kernel leaves nothing stale: the vertices it was mapping count as moved until a call maps them (the kernel is
+    idempotent), and the faces are ``triangulate``'s. Before, they were marked seen first, so an interruption before
+    the launch kept the old faces for good."""
+    from lodprt.devices import warp
+
+    wp = warp()
+    h, faces = bunny_hierarchy, bunny_floor.faces
+    tri = IncrementalTriangulation(h, faces, device)
+    cut = Cut.base(h, faces)
+    assert tri.update(cut.anc)
+    act = np.flatnonzero(cut.active)
+    cut.force_refine_list(act[act >= h.num_vertices][:64], device="cpu")
+    real = wp.launch
+
+    def interrupted(*args, **kwargs):
+        if when == "after":
+            real(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(wp, "launch", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        tri.update(cut.anc)
+    monkeypatch.undo()
+    assert tri.update(cut.anc)  # still to be mapped
+    np.testing.assert_array_equal(rows(tri.faces()), rows(triangulate(h, faces, cut.anc)))
+    assert not tri.update(cut.anc)

@@ -26,12 +26,10 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.launches import ROWS_MIN, KernelThreads
-from lodprt.runtime import node_bounds
+from lodprt.runtime import frame_error, node_bounds
 from lodprt.runtime.node_bounds import NodeErrors, scaled_error_vectors
-from lodprt.runtime import frame_error
 from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
-from lodprt.runtime.frame_error import BOUND_RANGE
 from lodprt.runtime.frames import Frame
 from lodprt.runtime.refinement import HYSTERESIS, CutRefinement, ErrorCache
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
@@ -383,7 +381,9 @@ class Runtime:
         """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut, read-only; kept
         while no active ancestor moves (they make the cut's nodes): a still cut, the full mesh with LOD off."""
         h = self.h
-        if not self._tri.update(self.cut.anc) and self._mesh is not None:
+        if self._tri.update(self.cut.anc):
+            self._mesh = None  # until remade below: an interruption before then must not leave the old one current
+        if self._mesh is not None:
             return self._mesh
         vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
         vid = vid[self.store.referenced[vid]]  # a vertex no face uses is never drawn: not relit
@@ -445,7 +445,7 @@ class Runtime:
         if pinning or (not still and self.motion_bound is not None):
             if pinning:  # E-5 from the coarsest bound; E-4's bound is kept for the frames in motion
                 self.motion_bound = self.motion_bound or self.error_bound
-                self.error_bound = BOUND_RANGE[1]
+                self.error_bound = frame_error.BOUND_RANGE[1]
             else:  # moving again: E-4's bound back, the pins dropped
                 self.error_bound, self.motion_bound = self.motion_bound, None
             self.refinement.pin(None)

@@ -44,10 +44,11 @@ class IncrementalTriangulation:
         moved = np.flatnonzero(anc != self._seen).astype(np.int32)
         if not len(moved):
             return False
-        self._seen[moved] = anc[moved]
         a = wp.array(anc, dtype=wp.int32, device=self.device, copy=self.device != "cpu")
         wp.launch(kv.retriangulate, dim=1, inputs=[wp.array(moved, dtype=wp.int32, device=self.device),
                                                    *self._in, a, *self._state], device=self.device)
+        # seen only once mapped: an interruption before this line leaves them to map again (the kernel is idempotent)
+        self._seen[moved] = anc[moved]
         return True
 
     def faces(self, anc: np.ndarray | None = None) -> np.ndarray:
