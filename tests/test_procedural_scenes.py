@@ -88,8 +88,9 @@ def test_bunny_coarse_is_a_quarter_of_the_bunny_and_outward(scenes):
 
 
 def test_rough_is_the_decimated_bunny_moved_along_its_normals(scenes):
-    """``rough``: the bunny decimated to ROUGH_FACES, just under MAX_TRIANGLES (pymeshlab, the same faces), each vertex moved
-    along its normal (nothing tangential) by white noise whose spread is ROUGH_NOISE median edges; wound outward."""
+    """``rough``: the bunny decimated to ROUGH_FACES, just under MAX_TRIANGLES (pymeshlab, the same faces), each
+    vertex moved along its normal (nothing tangential) by white noise whose spread is ROUGH_NOISE median edges; wound
+    outward."""
     import trimesh
 
     _, pos, faces = scenes["rough"]["objects"][0]

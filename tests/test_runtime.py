@@ -212,6 +212,7 @@ def test_an_interrupted_frame_leaves_no_stale_mesh(store, monkeypatch):
     before the move (which ``Runtime._cut_mesh`` kept as current while nothing moved after). A fixed bound: no E-5
     on the still frame, so the cut does not move again and only the cache could tell."""
     from lodprt.model.hierarchy import triangulate
+    from lodprt.runtime.triangulation import IncrementalTriangulation
 
     def rows(t):
         t = np.sort(t, axis=1)
@@ -222,15 +223,14 @@ def test_an_interrupted_frame_leaves_no_stale_mesh(store, monkeypatch):
     r.set_camera(orbit_camera(r, 0.0))
     before = r.update(max_passes=10_000)
     r.set_camera(orbit_camera(r, 0.8, dist=0.6))
-    faces = r._tri.faces
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(r._tri, "faces", interrupted)
+    monkeypatch.setattr(IncrementalTriangulation, "faces", interrupted)  # after update() took in the move
     with pytest.raises(KeyboardInterrupt):
         r.update(max_passes=10_000)
-    monkeypatch.setattr(r._tri, "faces", faces)
+    monkeypatch.undo()
     after = r.update(max_passes=10_000)
     assert after.stats["refined"] + after.stats["coarsened"] == 0  # the cut had moved in the interrupted frame
     np.testing.assert_array_equal(rows(after.vertex_ids[after.triangles]), rows(triangulate(r.h, r.faces, r.cut.anc)))
