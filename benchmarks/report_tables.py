@@ -153,10 +153,18 @@ def runtime(r: dict) -> str:
         full = p["mode"] == "full mesh"
         rows.append([p["path"], p["mode"], n(p["median_triangles"]), "0" if full else f(p["median_ms_cut"]),
                      f(p["median_ms_triangulate"]), f(p["median_ms_relight"]), f(p["median_ms_total"]),
-                     f(p["p95_ms_total"]), "1" if full else f"{p['speedup']:.1f}x", f(p["mean_ms_total"]),
-                     "1" if full else f"{p['mean_speedup']:.1f}x"])
+                     f(p["p95_ms_total"]), "1" if full else f"{p['speedup']:.2f}x", f(p["mean_ms_total"]),
+                     "1" if full else f"{p['mean_speedup']:.2f}x"])
     return md(["path", "mode", "triangles", "cut ms", "triangulation ms", "relight ms", "median ms", "p95 ms",
                "vs full (median)", "mean ms", "vs full (mean)"], rows)
+
+
+def runtime_cli(r: dict) -> str:
+    rows = [[c["store"], c["pair"] + 1, f"{n(c['triangles'])} / {n(c['full_triangles'])}", f(c["default_median_ms"]),
+             f(c["full_median_ms"]), f"{c['ratio']:.2f}x", f(c["default_mean_ms"]), f(c["full_mean_ms"]),
+             f"{c['mean_ratio']:.2f}x"] for c in r["cli"]]
+    return md(["store", "pair", "triangles / full", "`frames` median ms", "`frames --full` median ms", "ratio",
+               "`frames` mean ms", "`--full` mean ms", "ratio of means"], rows)
 
 
 def runtime_sweep(r: dict) -> str:
@@ -374,6 +382,7 @@ TABLES = {
     "view_cut_between": ("view_cut", view_cut_between),
     "view_cut": ("view_cut", view_cut),
     "runtime": ("runtime", runtime),
+    "runtime_cli": ("runtime", runtime_cli),
     "runtime_sweep": ("runtime", runtime_sweep),
     "light_spacing": ("light_spacing", light_spacing),
     "hierarchy": ("hierarchy", hierarchy),

@@ -14,7 +14,13 @@ names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
    counts the frames that estimate the frame's error, E-1, every few frames, which the median leaves out). Baseline in the same run: the same paths with LOD off (the
    full mesh relit every frame by the same kernel). The four are stepped in lockstep, frame by frame, so that
    the machine's slow spells fall on all of them (``run_paths``).
-2. Error-bound sweep of the thesis criterion, 0.2, 0.25, 0.315, 0.4 at alpha 0.6, over the orbit (120 frames; quick: 40): median
+2. The issue's yardstick as a user meets it: ``lodprt frames STORE --json`` (the default orbit, 120 frames at 800 x
+   600) against ``lodprt frames STORE --full --json``, each command in a fresh process, ``CLI_PAIRS`` pairs taking
+   turns at going first (``cli_pairs``), on this store and on the README's demo store (``lodprt bake demo``, every
+   setting at its default); per pair the median and mean ms per frame after the first, as each command's summary
+   reports them, and their ratios. A process that relights only the full mesh keeps its own memory state (the
+   lockstep of 1. interleaves four), so its frame time can differ from 1.'s.
+3. Error-bound sweep of the thesis criterion, 0.2, 0.25, 0.315, 0.4 at alpha 0.6, over the orbit (120 frames; quick: 40): median
    triangles beside the thesis' figures 21-24, median frame time (``stats["ms_total"]`` of ``Runtime.update()``,
    as in 1.: the rendering below is not timed), and the error of the frame against the full-resolution frame:
    both drawn by ``lodprt.render.Renderer`` as linear radiance images (every 10th frame, 400 x 300) and compared
@@ -23,7 +29,10 @@ names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
 
 from __future__ import annotations
 
+import json
 import shutil
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -35,6 +44,8 @@ from lodprt.runtime import Runtime
 
 THESIS_TRIANGLES = {0.2: 13335, 0.25: 9115, 0.315: 5742, 0.4: 2799}
 KEYS = ("ms_cut", "ms_triangulate", "ms_relight", "ms_total", "triangles", "nodes_touched")
+#: 2.: pairs of ``lodprt frames`` and ``lodprt frames --full`` per store, each command in a fresh process
+CLI_PAIRS = 2
 
 
 def build_store(quick: bool, folder: Path, device: str) -> Path:
@@ -60,6 +71,41 @@ def run_paths(rts: dict, path: str, frames: int) -> dict:
             s = rt.update().stats
             out[name].append({k: s[k] for k in KEYS})
     return out
+
+
+def cli_frames(store: Path, full: bool, device: str, frames: int | None) -> dict:
+    """One ``lodprt frames STORE --json [--full]`` in a fresh process (``frames`` None: the command's default): the
+    summary it prints."""
+    cmd = [sys.executable, "-m", "lodprt", "frames", str(store), "--json", "--device", device]
+    cmd += (["--frames", str(frames)] if frames else []) + (["--full"] if full else [])
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout)["summary"]
+
+
+def cli_pairs(stores: dict, device: str, pairs: int, frames: int | None) -> list[dict]:
+    """2.: for each store (name -> path), ``pairs`` pairs of the default and the ``--full`` command, the first pair
+    default first, the next full first, and so on; one row per pair."""
+    rows = []
+    for name, path in stores.items():
+        for k in range(pairs):
+            got = {full: cli_frames(path, full, device, frames) for full in ((k % 2 == 1), (k % 2 == 0))}
+            d, full = got[False], got[True]
+            rows.append({"store": name, "pair": k, "triangles": d["median_triangles"],
+                         "full_triangles": full["full_triangles"], "default_median_ms": d["median_ms"],
+                         "full_median_ms": full["median_ms"], "ratio": full["median_ms"] / d["median_ms"],
+                         "default_mean_ms": d["mean_ms"], "full_mean_ms": full["mean_ms"],
+                         "mean_ratio": full["mean_ms"] / d["mean_ms"]})
+            print(f"lodprt frames on {name}, pair {k}: default {d['median_ms']:.2f} ms, --full "
+                  f"{full['median_ms']:.2f} ms ({rows[-1]['ratio']:.2f}x)", flush=True)
+    return rows
+
+
+def demo_store(folder: Path) -> Path:
+    """The README's demo store: ``lodprt bake demo -o demo.zarr``, every setting at its default."""
+    path = folder / "demo.zarr"
+    subprocess.run([sys.executable, "-m", "lodprt", "bake", "demo", "-o", str(path)], check=True,
+                   capture_output=True, text=True)
+    return path
 
 
 def summary(rows: list[dict]) -> dict:
@@ -159,6 +205,8 @@ def main():
             base = next(x for x in rows if x["path"] == r["path"] and x["mode"] == "full mesh")
             r["speedup"] = base["median_ms_total"] / r["median_ms_total"]
             r["mean_speedup"] = base["mean_ms_total"] / r["mean_ms_total"]
+        cli_rows = cli_pairs({path.stem: path, "demo": demo_store(tmp)}, device, 1 if args.quick else CLI_PAIRS,
+                             20 if args.quick else None)
         sweep_rows = sweep(store, device, 40 if args.quick else 120, 10)
         nv, nf = store.num_vertices, int(len(store.faces))
     finally:
@@ -173,13 +221,18 @@ def main():
                        ("first_ms", "first ms", ".0f"), ("speedup", "vs full", ".2f"),
                        ("mean_speedup", "vs full (mean)", ".2f")]))
     print()
+    print(table(cli_rows, [("store", "store", "s"), ("pair", "pair", "d"), ("triangles", "triangles", ",.0f"),
+                           ("default_median_ms", "frames ms", ".2f"), ("full_median_ms", "--full ms", ".2f"),
+                           ("ratio", "ratio", ".2f"), ("default_mean_ms", "mean ms", ".2f"),
+                           ("full_mean_ms", "--full mean ms", ".2f"), ("mean_ratio", "mean ratio", ".2f")]))
+    print()
     print(table(sweep_rows, [("error_bound", "error bound", ".3f"), ("median_triangles", "triangles", ",.0f"),
                              ("thesis_triangles", "thesis tri", ","), ("median_ms", "median ms", ".2f"),
                              ("rel_rmse", "image rRMSE", ".4f"), ("p99_rel_error", "p99 rel err", ".3f")]))
     name = "runtime" + ("-quick" if args.quick else "")
     print("wrote", write(name, {"benchmark": "runtime", "quick": args.quick, "environment": environment(device),
                                 "vertices": nv, "faces": nf, "frames": frames,
-                                "init_seconds": init_s, "paths": rows, "sweep": sweep_rows,
+                                "init_seconds": init_s, "paths": rows, "cli": cli_rows, "sweep": sweep_rows,
                                 "per_frame": paths}, args.json))
     import matplotlib
 
