@@ -73,13 +73,20 @@ def run_paths(rts: dict, path: str, frames: int) -> dict:
     return out
 
 
+def command(cmd: list[str]) -> str:
+    """Run ``cmd``; what it printed. A failure stops the benchmark, naming the command, with the end of its stderr."""
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"runtime: {' '.join(cmd)} failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")
+    return proc.stdout
+
+
 def cli_frames(store: Path, full: bool, device: str, frames: int | None) -> dict:
     """One ``lodprt frames STORE --json [--full]`` in a fresh process (``frames`` None: the command's default): the
     summary it prints."""
     cmd = [sys.executable, "-m", "lodprt", "frames", str(store), "--json", "--device", device]
     cmd += (["--frames", str(frames)] if frames else []) + (["--full"] if full else [])
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True)
-    return json.loads(out.stdout)["summary"]
+    return json.loads(command(cmd))["summary"]
 
 
 def cli_pairs(stores: dict, device: str, pairs: int, frames: int | None) -> list[dict]:
@@ -88,23 +95,23 @@ def cli_pairs(stores: dict, device: str, pairs: int, frames: int | None) -> list
     rows = []
     for name, path in stores.items():
         for k in range(pairs):
-            got = {full: cli_frames(path, full, device, frames) for full in ((k % 2 == 1), (k % 2 == 0))}
-            d, full = got[False], got[True]
-            rows.append({"store": name, "pair": k, "triangles": d["median_triangles"],
-                         "full_triangles": full["full_triangles"], "default_median_ms": d["median_ms"],
-                         "full_median_ms": full["median_ms"], "ratio": full["median_ms"] / d["median_ms"],
-                         "default_mean_ms": d["mean_ms"], "full_mean_ms": full["mean_ms"],
-                         "mean_ratio": full["mean_ms"] / d["mean_ms"]})
-            print(f"lodprt frames on {name}, pair {k}: default {d['median_ms']:.2f} ms, --full "
-                  f"{full['median_ms']:.2f} ms ({rows[-1]['ratio']:.2f}x)", flush=True)
+            order = (True, False) if k % 2 else (False, True)  # which goes first: --full on odd pairs
+            got = {full: cli_frames(path, full, device, frames) for full in order}
+            lod, base = got[False], got[True]
+            rows.append({"store": name, "pair": k, "triangles": lod["median_triangles"],
+                         "full_triangles": base["full_triangles"], "default_median_ms": lod["median_ms"],
+                         "full_median_ms": base["median_ms"], "ratio": base["median_ms"] / lod["median_ms"],
+                         "default_mean_ms": lod["mean_ms"], "full_mean_ms": base["mean_ms"],
+                         "mean_ratio": base["mean_ms"] / lod["mean_ms"]})
+            print(f"lodprt frames on {name}, pair {k}: default {lod['median_ms']:.2f} ms, --full "
+                  f"{base['median_ms']:.2f} ms ({rows[-1]['ratio']:.2f}x)", flush=True)
     return rows
 
 
 def demo_store(folder: Path) -> Path:
     """The README's demo store: ``lodprt bake demo -o demo.zarr``, every setting at its default."""
     path = folder / "demo.zarr"
-    subprocess.run([sys.executable, "-m", "lodprt", "bake", "demo", "-o", str(path)], check=True,
-                   capture_output=True, text=True)
+    command([sys.executable, "-m", "lodprt", "bake", "demo", "-o", str(path)])
     return path
 
 
