@@ -34,6 +34,13 @@ def orbit_camera(rt, angle, *, dist=0.9, height=0.45, **kw):
     return Camera(eye=tuple(eye), target=tuple(c), **{"width": 320, "height": 240, **kw})
 
 
+def rows(t: np.ndarray) -> np.ndarray:
+    """A triangle list in a canonical order: corners sorted, then the rows (two lists of the same faces compare
+    equal)."""
+    t = np.sort(t, axis=1)
+    return t[np.lexsort(t.T[::-1])]
+
+
 def assert_legal(rt):
     cut = rt.cut
     np.testing.assert_array_equal(cut.anc, active_ancestors(rt.h, cut.active))  # a front
@@ -174,10 +181,6 @@ def test_frame_mesh_follows_the_cut_and_is_the_callers(store):
     no later frame)."""
     from lodprt.model.hierarchy import triangulate
 
-    def rows(t):  # a triangle list in a canonical order: corners sorted, then the rows
-        t = np.sort(t, axis=1)
-        return t[np.lexsort(t.T[::-1])]
-
     def reference(r):
         vid = np.sort(r.h.vertex[r.cut.nodes])
         return vid[r.store.referenced[vid]], rows(triangulate(r.h, r.faces, r.cut.anc))
@@ -213,10 +216,6 @@ def test_an_interrupted_frame_leaves_no_stale_mesh(store, monkeypatch):
     on the still frame, so the cut does not move again and only the cache could tell."""
     from lodprt.model.hierarchy import triangulate
     from lodprt.runtime.triangulation import IncrementalTriangulation
-
-    def rows(t):
-        t = np.sort(t, axis=1)
-        return t[np.lexsort(t.T[::-1])]
 
     r = Runtime(store, criterion="screen", error_bound=0.8)
     r.set_lights([store.light_positions[0]])
