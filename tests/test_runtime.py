@@ -236,6 +236,47 @@ def test_an_interrupted_frame_leaves_no_stale_mesh(store, monkeypatch):
     assert len(after.triangles) != len(before.triangles)
 
 
+def test_frames_in_motion_equal_with_the_triangles_made_meanwhile(store, monkeypatch):
+    """On the CPU a frame in motion makes its triangles on a worker thread while it relights the cut's vertices
+    (``CutMesh``; they need the cut's nodes only). Every frame of a moving camera and light (E-4 estimates, the
+    first frame's E-5, a frame interrupted while it relit) equals, array for array, the frame of a Runtime that
+    makes the triangles first: vertices, triangles, coefficients, radiance, and the cut's counts."""
+    from lodprt.runtime import session
+    from lodprt.runtime.triangulation import CutMesh
+
+    class Serial(CutMesh):
+        def __init__(self, *args, background=False, **kwargs):
+            super().__init__(*args, background=False, **kwargs)
+
+    monkeypatch.setattr(session, "CutMesh", Serial)
+    serial = Runtime(store)
+    monkeypatch.undo()
+    worker = Runtime(store)
+    started = []
+    start = CutMesh.start
+    monkeypatch.setattr(CutMesh, "start", lambda self, cut: (started.append(self.background), start(self, cut))[1])
+    lights = store.light_positions
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    for k in range(12):
+        for rt in (serial, worker):
+            rt.set_camera(orbit_camera(rt, 0.15 * k, dist=0.9 - 0.02 * k))
+            rt.set_lights([lights[0] + (lights[-1] - lights[0]) * (k / 11)])
+            if k == 6:  # interrupted while it relights: the worker's mesh is left in the making
+                with monkeypatch.context() as m:
+                    m.setattr(Runtime, "_relight", interrupted)
+                    with pytest.raises(KeyboardInterrupt):
+                        rt.update()
+        a, b = serial.update(), worker.update()
+        for name in ("vertex_ids", "triangles", "coefficients", "radiance"):
+            np.testing.assert_array_equal(getattr(b, name), getattr(a, name), err_msg=f"frame {k}: {name}")
+        for name in ("triangles", "vertices", "refined", "coarsened", "passes", "estimated_psnr_db"):
+            assert b.stats[name] == a.stats[name], (k, name)
+    assert started and all(started)  # frames in motion used the worker (the serial Runtime never starts one)
+
+
 def test_still_frames_hold_geometry_at_the_default_rate(store):
     """S-1's geometric term as the run time evaluates it: on E-5's still frame (every pixel measured) at the default
     bound's rate, SCREEN_BOUND / pixel_tolerance per pixel, not the coarsest bound's (ten times it); in motion at the

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lodprt.model.hierarchy import triangulate
-from lodprt.runtime.triangulation import IncrementalTriangulation
+from lodprt.runtime.triangulation import CutMesh, IncrementalTriangulation
 from lodprt.runtime.view_cut import Cut
 
 pytestmark = pytest.mark.warp_debug
@@ -93,3 +93,58 @@ def test_an_interrupted_update_maps_again(bunny_floor, bunny_hierarchy, device, 
     assert tri.update(cut.anc)  # still to be mapped
     np.testing.assert_array_equal(rows(tri.faces()), rows(triangulate(h, faces, cut.anc)))
     assert not tri.update(cut.anc)
+
+
+def mesh_faces(mesh) -> np.ndarray:
+    """A ``CutMesh`` mesh's triangles as rows of original vertex ids."""
+    vid, tri = mesh
+    return rows(vid[tri])
+
+
+@pytest.mark.parametrize("background", [False, True])
+def test_cut_mesh_made_on_a_worker_is_the_cut_mesh(bunny_floor, bunny_hierarchy, device, monkeypatch, background):
+    """``CutMesh`` (the frame's mesh; on the CPU its triangles made on a worker thread while the frame relights):
+    after each move of the cut, ``start`` then ``take`` gives ``triangulate``'s faces over exactly the cut's
+    referenced vertices (ascending, as ``vertices`` gives them before the triangles are made); a mesh interrupted on
+    the worker (KeyboardInterrupt inside ``faces``) raises from ``take`` and leaves nothing stale; a mesh started and
+    never taken (a frame interrupted while it relit) is waited for by the next call."""
+    h, faces = bunny_hierarchy, bunny_floor.faces
+    referenced = np.zeros(h.num_vertices, bool)
+    referenced[np.unique(faces)] = True
+    meshes = CutMesh(h, faces, referenced, device, background=background)
+    cut = Cut.base(h, faces)
+    rng = np.random.default_rng(5)
+
+    def move():
+        act = np.flatnonzero(cut.active)
+        inner = act[act >= h.num_vertices]
+        cut.force_refine_list(rng.permutation(inner)[: max(len(inner) // 3, 1)], device="cpu")
+
+    def check(mesh):
+        want = np.sort(h.vertex[cut.nodes])
+        np.testing.assert_array_equal(mesh[0], want[referenced[want]])
+        np.testing.assert_array_equal(mesh_faces(mesh), rows(triangulate(h, faces, cut.anc)))
+        assert not mesh[0].flags.writeable and not mesh[1].flags.writeable
+
+    for _ in range(3):
+        move()
+        vid = meshes.vertices(cut.nodes)
+        meshes.start(cut)
+        got = meshes.take()
+        np.testing.assert_array_equal(got[0], vid)
+        check(got)
+        assert meshes.waited >= 0.0
+    move()
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(IncrementalTriangulation, "faces", interrupted)
+    with pytest.raises(KeyboardInterrupt):  # from take on the worker, from start without one
+        meshes.start(cut)
+        meshes.take()
+    monkeypatch.undo()
+    check(meshes(cut))  # the move was taken in, the mesh not made: made now
+    move()
+    meshes.start(cut)  # never taken
+    check(meshes(cut))

@@ -36,7 +36,7 @@ from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
 from lodprt.runtime.samples import default_white
 from lodprt.runtime.shadow_edges import area_weight, shadow_edge_errors, sphere_pixels, straddling_steps
-from lodprt.runtime.triangulation import IncrementalTriangulation
+from lodprt.runtime.triangulation import CutMesh
 from lodprt.runtime.view_cut import Cut
 
 log = logging.getLogger(__name__)
@@ -143,8 +143,8 @@ class Runtime:
         #: how the cut moves (refine/coarsen passes) and when a candidate's error is evaluated again
         self.refinement = CutRefinement(h, cut, self.device, self.max_passes)
         self.errors = ErrorCache(h.num_nodes)
-        self._tri = IncrementalTriangulation(h, self.faces, self.device)  # T-3.2, what changed only
-        self._mesh: tuple | None = None  # (the cut's vertices, its triangles) as _tri last mapped them: _cut_mesh
+        # the cut's mesh (T-3.2, what changed only); on the CPU made on a worker thread while a frame relights
+        self._meshes = CutMesh(h, self.faces, self.store.referenced, self.device, background=self.device == "cpu")
         self.camera: Camera | None = None
         self._centre = None  # the default camera target, made on first use
         if self.lod:  # the bounds the criterion reads, made with each sample (counted in cache_bytes from the start)
@@ -378,21 +378,9 @@ class Runtime:
         return self.refinement.converge(self.errors, evaluate, self.error_bound, max_passes, enabled=self.lod)
 
     def _cut_mesh(self) -> tuple[np.ndarray, np.ndarray]:
-        """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut, read-only; kept
-        while no active ancestor moves (they make the cut's nodes): a still cut, the full mesh with LOD off."""
-        h = self.h
-        if self._tri.update(self.cut.anc):
-            self._mesh = None  # until remade below: an interruption before then must not leave the old one current
-        if self._mesh is not None:
-            return self._mesh
-        vid = np.sort(h.vertex[self.cut.nodes]).astype(np.int32)  # ascending: gathers walk memory forward
-        vid = vid[self.store.referenced[vid]]  # a vertex no face uses is never drawn: not relit
-        lut = np.full(h.num_vertices, -1, np.int32)
-        lut[vid] = np.arange(len(vid), dtype=np.int32)
-        tri = np.take(lut, self._tri.faces())
-        vid.flags.writeable = tri.flags.writeable = False
-        self._mesh = (vid, tri)
-        return vid, tri
+        """(vertex ids (A,) int32 ascending, triangles (M, 3) indices into them) of the current cut, read-only
+        (``CutMesh``: kept while no active ancestor moves; a still cut, the full mesh with LOD off)."""
+        return self._meshes(self.cut)
 
     def estimate_frame_error(self, vid: np.ndarray, tri: np.ndarray, coefficients: np.ndarray | None = None, *,
                              steer: bool = True, every_pixel: bool = False) -> None:
@@ -450,9 +438,15 @@ class Runtime:
                 self.error_bound, self.motion_bound = self.motion_bound, None
             self.refinement.pin(None)
             self.errors.forget()
+        self._meshes.wait()  # an interrupted frame's mesh still in the making: done before the cut moves
         refined, coarsened, touched, passes = self._converge(10_000 if pinning else max_passes)
         t1 = time.perf_counter()
-        vid, tri = self._cut_mesh()
+        overlap = self.lod and not settle and not pinning and self._meshes.background  # in motion, on the CPU
+        if overlap:  # the triangles on the worker thread, the vertices relit meanwhile (they need the nodes only)
+            self._meshes.start(self.cut)
+            vid = self._meshes.vertices(self.cut.nodes)
+        else:
+            vid, tri = self._cut_mesh()
         t2 = time.perf_counter()
         counts = (refined, coarsened, touched, passes)
         coef = rad = None
@@ -461,8 +455,13 @@ class Runtime:
             self.schedule.confirmed = True
         steer = time.perf_counter() - t2  # the estimate and steering count as cut work
         if coef is None:
-            coef, rad = self._relight(vid)
+            try:
+                coef, rad = self._relight(vid)
+            finally:
+                if overlap:
+                    vid, tri = self._meshes.take()
         t3 = time.perf_counter()
+        waited = self._meshes.waited if overlap else 0.0  # the triangulation's time not hidden by the relighting
         if estimating and not pinning:  # E-4 from this frame's relit cut; the bound moves for the next frames
             self.estimate_frame_error(vid, tri, coef)
         if settle:  # M-6: the first frame follows the light's shadow edges
@@ -485,8 +484,8 @@ class Runtime:
             "estimated_psnr_db": self.estimated_psnr,  # E-3 (None without a target_psnr)
             "estimate_stride_px": self.estimate_stride,  # its cells (1: every pixel, the first and still frames)
             "pinned_nodes": self.refinement.pins,  # E-5 (first and still frames)
-            "ms_cut": 1e3 * (t1 - t0 + steer), "ms_triangulate": 1e3 * (t2 - t1),
-            "ms_relight": 1e3 * (t3 - t2 - steer), "ms_total": 1e3 * (t3 - t0),
+            "ms_cut": 1e3 * (t1 - t0 + steer), "ms_triangulate": 1e3 * (t2 - t1 + waited),
+            "ms_relight": 1e3 * (t3 - t2 - steer - waited), "ms_total": 1e3 * (t3 - t0),
         }
         return Frame(vertex_ids=vid.copy(), positions=np.take(self.positions, vid, axis=0),
                      normals=np.take(self.normals, vid, axis=0), triangles=tri.astype(np.int32),

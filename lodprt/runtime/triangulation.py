@@ -6,6 +6,10 @@ reference (the same faces, in another order)."""
 
 from __future__ import annotations
 
+import concurrent.futures
+import threading
+import time
+
 import numpy as np
 
 from lodprt.devices import warp
@@ -67,3 +71,73 @@ class IncrementalTriangulation:
         if n:  # gathered where the state lives: only the cut's faces come back from the device
             wp.launch(kv.gather_live, dim=n, inputs=[live, fmap], outputs=[out], device=self.device)
         return out.numpy()
+
+
+class CutMesh:
+    """The cut's mesh as a frame draws it: (vertex ids (A,) int32 ascending, triangles (M, 3) indices into them),
+    read-only, kept while no active ancestor moves (they make the cut's nodes).
+
+    The vertices need the cut's nodes only, the triangles the triangulation (T-3.2, one thread on the CPU): with
+    ``background``, ``start`` makes them on a worker thread while the caller relights the vertices on the cores,
+    and ``take`` waits for them. The cut must not move in between; ``wait`` (the next frame, before it moves the
+    cut) waits for a mesh still in the making, after an interruption too."""
+
+    def __init__(self, h: Hierarchy, faces: np.ndarray, referenced: np.ndarray, device: str = "cpu", *,
+                 background: bool = False):
+        self.h, self.referenced = h, referenced
+        self.triangulation = IncrementalTriangulation(h, faces, device)
+        self.mesh: tuple | None = None
+        self._lock = threading.Lock()  # one maker at a time: the worker's, or the caller's after it
+        self.background = bool(background)
+        self._pool = concurrent.futures.ThreadPoolExecutor(1) if background else None
+        self._pending: concurrent.futures.Future | None = None
+        self.waited = 0.0  # seconds the last ``take`` waited for the worker
+
+    def vertices(self, nodes: np.ndarray) -> np.ndarray:
+        """(A,) int32 ascending: the vertices of ``nodes`` that a face uses (one never drawn is not relit)."""
+        vid = np.sort(self.h.vertex[nodes]).astype(np.int32)  # ascending: gathers walk memory forward
+        return vid[self.referenced[vid]]
+
+    def __call__(self, cut) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh of ``cut`` now (in this thread)."""
+        self.wait()
+        return self._make(cut)
+
+    def _make(self, cut) -> tuple[np.ndarray, np.ndarray]:
+        with self._lock:
+            if self.triangulation.update(cut.anc):
+                self.mesh = None  # until remade below: an interruption before then must not leave the old one
+            if self.mesh is None:
+                vid = self.vertices(cut.nodes)
+                lut = np.full(self.h.num_vertices, -1, np.int32)
+                lut[vid] = np.arange(len(vid), dtype=np.int32)
+                tri = np.take(lut, self.triangulation.faces())
+                vid.flags.writeable = tri.flags.writeable = False
+                self.mesh = (vid, tri)
+            return self.mesh
+
+    def start(self, cut) -> None:
+        """Begin the mesh of ``cut`` on the worker thread (in this one without ``background``)."""
+        self.wait()
+        if self._pool is None:
+            self(cut)
+        else:
+            self._pending = self._pool.submit(self._make, cut)
+
+    def take(self) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh ``start`` began (its error, if it raised); ``waited``: how long this waited for it."""
+        self.waited = 0.0
+        if self._pending is None:  # made in start, in this thread
+            return self.mesh
+        t = time.perf_counter()
+        try:
+            return self._pending.result()
+        finally:
+            self._pending = None
+            self.waited = time.perf_counter() - t
+
+    def wait(self) -> None:
+        """Wait for a mesh still in the making (its error is dropped: the next call makes the mesh again)."""
+        if self._pending is not None:
+            concurrent.futures.wait([self._pending])
+            self._pending = None
