@@ -148,3 +148,41 @@ def test_cut_mesh_made_on_a_worker_is_the_cut_mesh(bunny_floor, bunny_hierarchy,
     move()
     meshes.start(cut)  # never taken
     check(meshes(cut))
+
+
+def test_cut_mesh_interrupted_while_it_waits_waits_again(bunny_floor, bunny_hierarchy, monkeypatch):
+    """A frame interrupted while ``take`` waits for the worker (Ctrl-C in the viewer): the worker still reads the
+    cut, so the next frame's ``wait`` must wait for it before the cut moves (before, ``take`` forgot the worker
+    and the next frame could move the cut under it)."""
+    import concurrent.futures
+    import threading
+
+    h, faces = bunny_hierarchy, bunny_floor.faces
+    referenced = np.zeros(h.num_vertices, bool)
+    referenced[np.unique(faces)] = True
+    meshes = CutMesh(h, faces, referenced, "cpu", background=True)
+    cut = Cut.base(h, faces)
+    go, finished = threading.Event(), []
+    real = IncrementalTriangulation.faces
+
+    def held(self, *args, **kwargs):  # the worker's triangles, held until ``go``
+        go.wait(10.0)
+        out = real(self, *args, **kwargs)
+        finished.append(True)
+        return out
+
+    def interrupted(self, *args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(IncrementalTriangulation, "faces", held)
+    meshes.start(cut)
+    with monkeypatch.context() as m:
+        m.setattr(concurrent.futures.Future, "result", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            meshes.take()
+    assert not finished
+    threading.Timer(0.2, go.set).start()
+    meshes.wait()  # the next frame, before it moves the cut
+    assert finished
+    monkeypatch.undo()
+    np.testing.assert_array_equal(mesh_faces(meshes(cut)), rows(triangulate(h, faces, cut.anc)))

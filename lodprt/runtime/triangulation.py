@@ -132,8 +132,9 @@ class CutMesh:
         t = time.perf_counter()
         try:
             return self._pending.result()
-        finally:
-            self._pending = None
+        finally:  # interrupted while it waited: the worker still runs, and ``wait`` waits for it
+            if self._pending.done():
+                self._pending = None
             self.waited = time.perf_counter() - t
 
     def wait(self) -> None:
