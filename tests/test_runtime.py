@@ -209,6 +209,11 @@ def test_frame_mesh_follows_the_cut_and_is_the_callers(store):
             np.testing.assert_array_equal(again.triangles, frames[-1].triangles)
 
 
+def interrupted(*args, **kwargs):
+    """Stands in for a call that Ctrl-C interrupts (KeyboardInterrupt)."""
+    raise KeyboardInterrupt
+
+
 def test_an_interrupted_frame_leaves_no_stale_mesh(store, monkeypatch):
     """A frame interrupted while it makes the cut's mesh (KeyboardInterrupt: Ctrl-C in the viewer or a notebook),
     after the triangulation took in the cut's move: the next frame of the same cut draws the cut's mesh, not the one
@@ -222,9 +227,6 @@ def test_an_interrupted_frame_leaves_no_stale_mesh(store, monkeypatch):
     r.set_camera(orbit_camera(r, 0.0))
     before = r.update(max_passes=10_000)
     r.set_camera(orbit_camera(r, 0.8, dist=0.6))
-
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
 
     monkeypatch.setattr(IncrementalTriangulation, "faces", interrupted)  # after update() took in the move
     with pytest.raises(KeyboardInterrupt):
@@ -256,9 +258,6 @@ def test_frames_in_motion_equal_with_the_triangles_made_meanwhile(store, monkeyp
     start = CutMesh.start
     monkeypatch.setattr(CutMesh, "start", lambda self, cut: (started.append(self.background), start(self, cut))[1])
     lights = store.light_positions
-
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
 
     for k in range(12):
         for rt in (serial, worker):

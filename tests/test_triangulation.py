@@ -95,6 +95,11 @@ def test_an_interrupted_update_maps_again(bunny_floor, bunny_hierarchy, device, 
     assert not tri.update(cut.anc)
 
 
+def interrupted(*args, **kwargs):
+    """Stands in for a call that Ctrl-C interrupts (KeyboardInterrupt)."""
+    raise KeyboardInterrupt
+
+
 def mesh_faces(mesh) -> np.ndarray:
     """A ``CutMesh`` mesh's triangles as rows of original vertex ids."""
     vid, tri = mesh
@@ -108,9 +113,7 @@ def test_cut_mesh_made_on_a_worker_is_the_cut_mesh(bunny_floor, bunny_hierarchy,
     referenced vertices (ascending, as ``vertices`` gives them before the triangles are made); a mesh interrupted on
     the worker (KeyboardInterrupt inside ``faces``) raises from ``take`` and leaves nothing stale; a mesh started and
     never taken (a frame interrupted while it relit) is waited for by the next call."""
-    h, faces = bunny_hierarchy, bunny_floor.faces
-    referenced = np.zeros(h.num_vertices, bool)
-    referenced[np.unique(faces)] = True
+    h, faces, referenced = bunny_hierarchy, bunny_floor.faces, bunny_floor.referenced
     meshes = CutMesh(h, faces, referenced, device, background=background)
     cut = Cut.base(h, faces)
     rng = np.random.default_rng(5)
@@ -136,9 +139,6 @@ def test_cut_mesh_made_on_a_worker_is_the_cut_mesh(bunny_floor, bunny_hierarchy,
         assert meshes.waited >= 0.0
     move()
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
-
     monkeypatch.setattr(IncrementalTriangulation, "faces", interrupted)
     with pytest.raises(KeyboardInterrupt):  # from take on the worker, from start without one
         meshes.start(cut)
@@ -157,9 +157,7 @@ def test_cut_mesh_interrupted_while_it_waits_waits_again(bunny_floor, bunny_hier
     import concurrent.futures
     import threading
 
-    h, faces = bunny_hierarchy, bunny_floor.faces
-    referenced = np.zeros(h.num_vertices, bool)
-    referenced[np.unique(faces)] = True
+    h, faces, referenced = bunny_hierarchy, bunny_floor.faces, bunny_floor.referenced
     meshes = CutMesh(h, faces, referenced, "cpu", background=True)
     cut = Cut.base(h, faces)
     go, finished = threading.Event(), []
@@ -170,9 +168,6 @@ def test_cut_mesh_interrupted_while_it_waits_waits_again(bunny_floor, bunny_hier
         out = real(self, *args, **kwargs)
         finished.append(True)
         return out
-
-    def interrupted(self, *args, **kwargs):
-        raise KeyboardInterrupt
 
     monkeypatch.setattr(IncrementalTriangulation, "faces", held)
     meshes.start(cut)
