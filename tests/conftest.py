@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 
+import debug_subset
 import skip_policy
 from lodprt.devices import available_devices
 
@@ -108,3 +109,13 @@ def pytest_configure(config):
                 return launch(kernel, *args, **kw)
 
         wp.launch = named_launch
+
+
+def pytest_collection_finish(session):
+    """The bounds-checked subset starts now, beside the rest of the suite, when this session runs its test
+    (``debug_subset``)."""
+    debug_subset.start(session)
+
+
+def pytest_sessionfinish(session):
+    debug_subset.finish(session)

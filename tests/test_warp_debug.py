@@ -1,29 +1,25 @@
 """The bounds-checked kernel subset: every test marked ``warp_debug`` (every kernel at least once, on every store
-kind) run again in a subprocess with Warp's debug mode, where an index past an array's end stops the process."""
-
-import os
-import subprocess
-import sys
-from pathlib import Path
+kind) run again in a subprocess with Warp's debug mode, where an index past an array's end stops the process. The
+subprocess runs beside the rest of the suite from the end of collection (``debug_subset``)."""
 
 import pytest
 
-TESTS = Path(__file__).resolve().parent
+import debug_subset
 
 
-def test_marked_subset_passes_bounds_checked(request, tmp_path):
-    """`pytest --warp-debug -m warp_debug` passes; on failure the message names the last kernel launched."""
+def test_marked_subset_passes_bounds_checked(request):
+    """`pytest --warp-debug -m warp_debug` passes; on failure the message names the last kernel launched. The
+    session started it in the background when collection ended (``debug_subset``, ``tests/conftest.py``); were it
+    not running, the test starts it here."""
     if request.config.getoption("--warp-debug"):
         pytest.skip("this session is the bounds-checked run already")
-    log = tmp_path / "launches.txt"
-    env = dict(os.environ, LODPRT_WARP_DEBUG_LOG=str(log))
-    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "--warp-debug",
-                           "-m", "warp_debug", str(TESTS)], capture_output=True, text=True, timeout=3600,
-                          cwd=TESTS.parent, env=env)
-    if proc.returncode != 0:
-        launches = log.read_text().split() if log.is_file() else []
+    sub = request.config.stash.get(debug_subset.KEY, None)
+    if sub is None:
+        sub = request.config.stash[debug_subset.KEY] = debug_subset.Subset()
+    code, out, launches = sub.result()
+    if code != 0:
         last = launches[-1] if launches else "(none)"
-        tail = "\n".join((proc.stdout + proc.stderr).splitlines()[-40:])
-        pytest.fail(f"bounds-checked subset failed (exit {proc.returncode}); last kernel launched: {last}\n{tail}")
-    assert " passed" in proc.stdout
-    assert len(set(log.read_text().split())) >= 8  # the kernels ran (names logged once per launch)
+        tail = "\n".join(out.splitlines()[-40:])
+        pytest.fail(f"bounds-checked subset failed (exit {code}); last kernel launched: {last}\n{tail}")
+    assert " passed" in out
+    assert len(set(launches)) >= 8  # the kernels ran (names logged once per launch)
