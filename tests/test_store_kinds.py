@@ -195,7 +195,7 @@ def test_view_cut_relighting_on_every_kind(kinds, name):
 
 @pytest.mark.warp_debug
 @pytest.mark.parametrize("name", list(KINDS))
-def test_lights_between_samples_on_every_kind(kinds, name):
+def test_lights_between_samples_on_every_kind(kinds, name, request):
     """Every store kind under a light between samples, through every direct interpolation (M-1..M-4, the
     direct_light kernel on the cut and on the full mesh, with and without a hierarchy): ``light_coefficients``
     equals ``Runtime.coefficients`` and a frame's radiance equals its coefficients toward the eye; on a diffuse
@@ -212,7 +212,12 @@ def test_lights_between_samples_on_every_kind(kinds, name):
     light = store.light_positions[[0, 1, 3, 4]].mean(0).astype(np.float64)[None]
     eye = EYES[0]
     cam = Camera(eye=eye, target=(0.0, 0.1, 0.0), width=64, height=48)
-    for mode in ("direct", "direct-agree", "direct-blend"):
+    modes = ("direct", "direct-agree", "direct-blend")
+    # bounds-checked (--warp-debug), the order-8 kind's Runtime runs the default interpolation only: the three
+    # differ in how direct_light reads the samples' visibility, which the order-3 and order-4 kinds' Runtimes run
+    # bounds-checked in all three, not in the SH width; its other two took about 150 s of the 13-minute subset
+    cut_modes = modes[:1] if request.config.getoption("--warp-debug") and order == 8 else modes
+    for mode in modes:
         _, _, free = light_coefficients(store, light, interpolation=mode, device="cpu")
         if ks == 0 and mode != "direct-blend":  # M-4 blends the samples' shadows: not exact between them
             err = closed_form_error(scene, store, light[0], free, kd)
@@ -220,7 +225,7 @@ def test_lights_between_samples_on_every_kind(kinds, name):
                                                                              device="cpu")[2], kd)
                      for x in store.light_positions[[0, 1, 3, 4]].astype(np.float64))
             assert err <= (2e-5 if threshold is None else 1.5 * on + 1e-4), (mode, err, on)
-        if hier:
+        if hier and mode in cut_modes:
             rt = Runtime(store, device="cpu", interpolation=mode)
             rt.set_lights(light)
             rt.set_camera(cam)
@@ -228,7 +233,7 @@ def test_lights_between_samples_on_every_kind(kinds, name):
             np.testing.assert_allclose(rt.coefficients(), free, rtol=1e-4, atol=1e-5 * np.abs(free).max())
             want = radiance_toward(fr.positions, fr.normals, fr.coefficients, eye, np.ones(3))
             np.testing.assert_allclose(fr.radiance, want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
-        else:
+        elif not hier:
             fr = full_frame(store, cam, lights=light, interpolation=mode)
             np.testing.assert_allclose(fr.coefficients, free[fr.vertex_ids], rtol=1e-5,
                                        atol=1e-6 * np.abs(free).max())
