@@ -71,7 +71,7 @@ def wanted(session: pytest.Session) -> bool:
 
 def start(session: pytest.Session) -> None:
     """Start the subset in the background when this session will ask for it (``wanted``)."""
-    if wanted(session) and KEY not in session.config.stash:
+    if wanted(session):
         session.config.stash[KEY] = Subset()
 
 
