@@ -31,12 +31,32 @@ def bunny_path():
 
 
 @pytest.fixture(scope="session")
-def bunny_floor(bunny_path):
-    """The bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices)."""
+def bunny_floor(bunny_path, request):
+    """The bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices). Bounds-checked (``--warp-debug``),
+    the bunny halved twice (``debug_mesh``: 10,389 vertices with the floor): there every array access is checked
+    whatever the arrays' sizes, so the size that makes an optimised run's stray index land outside the allocation
+    buys nothing, and the debug build's unoptimised kernels take most of the subset's time."""
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
     pos, faces = load_mesh(bunny_path)
+    if request.config.getoption("--warp-debug"):
+        pos, faces = debug_mesh(pos, faces)
     return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
+
+
+def debug_mesh(positions, faces, halvings: int = 2):
+    """``positions``, ``faces`` halved ``halvings`` times by the hierarchy build's pymeshlab QEM halvings (survivors
+    at their original positions), the vertices no face uses dropped. Twice on the bunny: 8,789 vertices, more than
+    ``lodprt.launches.SPLIT_MIN``, so the per-vertex passes still run in slices."""
+    import numpy as np
+
+    from lodprt.model.hierarchy_levels import halvings as qem_halvings
+
+    used = np.unique(faces)
+    faces = np.searchsorted(used, faces)
+    *_, last = qem_halvings(positions[used], faces, target_base=0, max_levels=halvings, keep_boundary=True)
+    keep, local = np.unique(last, return_inverse=True)
+    return positions[used][keep], local.reshape(last.shape)
 
 
 @pytest.fixture(scope="session")

@@ -1,6 +1,7 @@
 """Every kind of store a bake can make (1 or n^2 coefficients, 1 or 3 channels, light cut or full, with or without a
 hierarchy, SH orders 1..8) through every radiance path and every command, on a scene of tens of thousands of
-vertices (the bunny on a 40 x 40 floor), so that an index past an array's end lands outside the allocation.
+vertices (the bunny on a 40 x 40 floor), so that an index past an array's end lands outside the allocation (in the
+bounds-checked run, where every access is checked, the bunny halved twice: ``conftest.bunny_floor``).
 
 The identities are checked per channel against references written from the arrays themselves (their widths, not
 the settings the code uses): ``radiance --sample K`` == ``radiance --light <sample K>`` == ``full_frame(sample=K)``
@@ -195,7 +196,7 @@ def test_view_cut_relighting_on_every_kind(kinds, name):
 
 @pytest.mark.warp_debug
 @pytest.mark.parametrize("name", list(KINDS))
-def test_lights_between_samples_on_every_kind(kinds, name, request):
+def test_lights_between_samples_on_every_kind(kinds, name):
     """Every store kind under a light between samples, through every direct interpolation (M-1..M-4, the
     direct_light kernel on the cut and on the full mesh, with and without a hierarchy): ``light_coefficients``
     equals ``Runtime.coefficients`` and a frame's radiance equals its coefficients toward the eye; on a diffuse
@@ -206,18 +207,13 @@ def test_lights_between_samples_on_every_kind(kinds, name, request):
     from lodprt.runtime.session import Runtime
     from lodprt.store.bake_store import open_store, radiance_toward
 
-    kd, ks, threshold, hier, order = KINDS[name]
+    kd, ks, threshold, hier, _ = KINDS[name]
     scene, path = kinds[name]
     store = open_store(path)
     light = store.light_positions[[0, 1, 3, 4]].mean(0).astype(np.float64)[None]
     eye = EYES[0]
     cam = Camera(eye=eye, target=(0.0, 0.1, 0.0), width=64, height=48)
-    modes = ("direct", "direct-agree", "direct-blend")
-    # bounds-checked (--warp-debug), the order-8 kind's Runtime runs the default interpolation only: the three
-    # differ in how direct_light reads the samples' visibility, which the order-3 and order-4 kinds' Runtimes run
-    # bounds-checked in all three, not in the SH width; its other two took about 150 s of the 13-minute subset
-    cut_modes = modes[:1] if request.config.getoption("--warp-debug") and order == 8 else modes
-    for mode in modes:
+    for mode in ("direct", "direct-agree", "direct-blend"):
         _, _, free = light_coefficients(store, light, interpolation=mode, device="cpu")
         if ks == 0 and mode != "direct-blend":  # M-4 blends the samples' shadows: not exact between them
             err = closed_form_error(scene, store, light[0], free, kd)
@@ -229,7 +225,7 @@ def test_lights_between_samples_on_every_kind(kinds, name, request):
             fr = full_frame(store, cam, lights=light, interpolation=mode)
             np.testing.assert_allclose(fr.coefficients, free[fr.vertex_ids], rtol=1e-5,
                                        atol=1e-6 * np.abs(free).max())
-        elif mode in cut_modes:
+        else:
             rt = Runtime(store, device="cpu", interpolation=mode)
             rt.set_lights(light)
             rt.set_camera(cam)
