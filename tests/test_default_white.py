@@ -157,10 +157,13 @@ def bake_peak(scene) -> tuple[int, list[int]]:
 
 def test_bake_memory_does_not_grow_with_the_samples():
     """8 vs 64 light samples: the peak of the bake's traced allocations within 10%, and what stays allocated after
-    each sample flat: a sample's coefficients (~190 KB here) go once written, its statistics (< 1 KB) stay."""
+    each sample flat: a sample's coefficients (~190 KB here) go once written, its statistics (< 1 KB) stay. On a
+    busy machine the progress callback may see one sample's coefficients still on their way to the writer (the
+    traced memory then swings by ~190 KB from one sample to the next), so the growth is read between the least
+    values of two windows of 8 samples, 48 samples apart."""
     bake(spot_scene(grid=(1, 1, 1)), None, sh_order=4, device="cpu", hierarchy=False)  # kernels loaded first
     peak8, _ = bake_peak(spot_scene(grid=(2, 2, 2), floor=2))
     peak64, after = bake_peak(spot_scene(grid=(4, 4, 4), floor=2))
     assert len(after) == 64
     assert peak64 <= 1.1 * peak8, (peak8, peak64)
-    assert after[-1] - after[7] < 56 * 4096, after  # the statistics dicts only
+    assert min(after[-8:]) - min(after[8:16]) < 48 * 4096, after  # the statistics dicts only
