@@ -1,6 +1,7 @@
 """Shared fixtures: every available Warp device, the test meshes shipped in tests/data, an OpenGL context check."""
 
 import functools
+import sys
 from pathlib import Path
 
 import pytest
@@ -33,30 +34,22 @@ def bunny_path():
 @pytest.fixture(scope="session")
 def bunny_floor(bunny_path, request):
     """The bunny on a 40 x 40 floor, default 3 x 1 x 3 lights (37,547 vertices). Bounds-checked (``--warp-debug``),
-    the bunny halved twice (``debug_mesh``: 10,389 vertices with the floor): there every array access is checked
-    whatever the arrays' sizes, so the size that makes an optimised run's stray index land outside the allocation
-    buys nothing, and the debug build's unoptimised kernels take most of the subset's time."""
+    the bunny decimated by pymeshlab to a quarter of its faces, as the view-cut benchmark's ``bunny-coarse`` scene
+    (``benchmarks/procedural.py``: 10,377 vertices with the floor, more than ``lodprt.launches.SPLIT_MIN``, so the
+    per-vertex passes still run in slices): there every array access is checked whatever the arrays' sizes, so the
+    size that makes an optimised run's stray index land outside the allocation buys nothing, and the debug build's
+    unoptimised kernels take most of the subset's time."""
     from lodprt.model.scene import THESIS_MATERIAL, assemble_scene, load_mesh
 
-    pos, faces = load_mesh(bunny_path)
     if request.config.getoption("--warp-debug"):
-        pos, faces = debug_mesh(pos, faces)
+        if str(REPO / "benchmarks") not in sys.path:
+            sys.path.insert(0, str(REPO / "benchmarks"))
+        from procedural import decimated_bunny
+
+        pos, faces = decimated_bunny(None)
+    else:
+        pos, faces = load_mesh(bunny_path)
     return assemble_scene([("bunny", pos, faces, THESIS_MATERIAL)], (40, 1.0, THESIS_MATERIAL), {}, "lights", "bunny")
-
-
-def debug_mesh(positions, faces, halvings: int = 2):
-    """``positions``, ``faces`` halved ``halvings`` times by the hierarchy build's pymeshlab QEM halvings (survivors
-    at their original positions), the vertices no face uses dropped. Twice on the bunny: 8,789 vertices, more than
-    ``lodprt.launches.SPLIT_MIN``, so the per-vertex passes still run in slices."""
-    import numpy as np
-
-    from lodprt.model.hierarchy_levels import halvings as qem_halvings
-
-    used = np.unique(faces)
-    faces = np.searchsorted(used, faces)
-    *_, last = qem_halvings(positions[used], faces, target_base=0, max_levels=halvings, keep_boundary=True)
-    keep, local = np.unique(last, return_inverse=True)
-    return positions[used][keep], local.reshape(last.shape)
 
 
 @pytest.fixture(scope="session")

@@ -1,7 +1,7 @@
 """Every kind of store a bake can make (1 or n^2 coefficients, 1 or 3 channels, light cut or full, with or without a
 hierarchy, SH orders 1..8) through every radiance path and every command, on a scene of tens of thousands of
 vertices (the bunny on a 40 x 40 floor), so that an index past an array's end lands outside the allocation (in the
-bounds-checked run, where every access is checked, the bunny halved twice: ``conftest.bunny_floor``).
+bounds-checked run, where every access is checked, the bunny at a quarter of its faces: ``conftest.bunny_floor``).
 
 The identities are checked per channel against references written from the arrays themselves (their widths, not
 the settings the code uses): ``radiance --sample K`` == ``radiance --light <sample K>`` == ``full_frame(sample=K)``
