@@ -87,3 +87,43 @@ def test_bad_nodes_are_refused(bunny_floor, bunny_hierarchy):
         cut.coarsen_list([bunny_hierarchy.num_nodes])
     with pytest.raises(LodprtError, match="does not exist"):
         cut.force_refine_list([-1])
+
+
+def test_nodes_follow_every_move(bunny_floor, bunny_hierarchy, device):
+    """``Cut.nodes`` is kept between moves (a frame asks for it several times): after every kind of move, the
+    Python rules and the sequential kernels alike, it is the active nodes again, and callers cannot write it."""
+    h = bunny_hierarchy
+    cut = random_cut(h, bunny_floor.faces, device, 3)
+    rng = np.random.default_rng(11)
+
+    def check():
+        nodes = cut.nodes
+        np.testing.assert_array_equal(nodes, np.flatnonzero(cut.active))
+        assert nodes is cut.nodes and not nodes.flags.writeable  # kept until the next move
+
+    def inner():
+        act = cut.nodes
+        return rng.permutation(act[act >= h.num_vertices])
+
+    def parents():
+        act = cut.nodes
+        return rng.permutation(np.unique(h.parent[act][h.parent[act] >= 0]))
+
+    moves = [
+        lambda: [cut.refine(int(k)) for k in inner()[:200]],
+        lambda: [cut.coarsen(int(k)) for k in parents()[:200]],
+        lambda: [cut.try_coarsen(int(k)) for k in parents()[:200]],
+        lambda: [cut.force_refine(int(k)) for k in inner()[:5]],
+        lambda: cut.refine_many(inner()[:40]),
+        lambda: cut.coarsen_many(parents()[:40]),
+        lambda: cut.force_refine_many(inner()[:10], max_rounds=2),
+        lambda: cut.force_refine_list(inner()[:40], device=device),
+        lambda: cut.coarsen_list(parents()[:40], device=device),
+    ]
+    check()
+    for i, move in enumerate(moves):
+        before = cut.active.copy()
+        move()
+        assert not np.array_equal(before, cut.active), i  # the move moved the cut
+        check()
+    legal(cut)

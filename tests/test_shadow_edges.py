@@ -72,23 +72,45 @@ def test_lit_bits_match_a_second_ray_caster(bars):
     assert np.array_equal(rt.lighting.lit_rows(len(kept)), kept)
 
 
-def test_straddling_steps_against_loops():
+@pytest.mark.parametrize("dtypes", [(np.int64, np.float64), (np.int32, np.float32)])  # the run time's: int32, f32
+def test_straddling_steps_against_loops(dtypes):
     from lodprt.runtime.shadow_edges import straddling_steps
 
     rng = np.random.default_rng(3)
     A, T = 60, 150
-    tri = rng.integers(0, A, (T, 3))
+    tri = rng.integers(0, A, (T, 3)).astype(dtypes[0])
     lit = rng.integers(0, 4, A).astype(np.int32)  # two lights: bits 0 and 1
-    rad = rng.random((A, 3)) * 5.0
+    rad = (rng.random((A, 3)) * 5.0).astype(dtypes[1])
     got = straddling_steps(tri, lit, rad, white=2.5)
     want = np.zeros(A)
     for t in tri:
         if len({int(lit[i]) for i in t}) > 1:
-            d = max(np.abs(rad[a] - rad[b]).max() / 2.5 for a in t for b in t)
+            d = max(np.abs(rad[a].astype(np.float64) - rad[b]).max() / 2.5 for a in t for b in t)  # float64
             for i in t:
                 want[i] = max(want[i], d)
     np.testing.assert_allclose(got, want, rtol=1e-12)
     assert not straddling_steps(tri, np.zeros(A, np.int32), rad, 1.0).any()  # nothing straddles: no step
+
+
+def test_extra_holds_this_frames_errors_only(bunny_floor, bunny_hierarchy):
+    """``CutRefinement.set_extra`` clears only the last frame's nodes: after several frames the M-6 errors are
+    this frame's alone, as a fresh array would hold them."""
+    from lodprt.runtime.refinement import CutRefinement
+    from lodprt.runtime.view_cut import Cut
+
+    h = bunny_hierarchy
+    ref = CutRefinement(h, Cut.base(h, bunny_floor.faces), "cpu", 1)
+    rng = np.random.default_rng(4)
+    for _ in range(4):
+        nodes = np.unique(rng.integers(h.num_vertices, h.num_nodes, 50))
+        err = rng.random(len(nodes))
+        ref.set_extra(nodes, err)
+        want = np.zeros(h.num_nodes, np.float32)
+        want[nodes] = err
+        np.testing.assert_array_equal(ref.extra, want)
+    ref.extra = None  # as the run time drops it (another criterion, LOD off): made again
+    ref.set_extra(nodes[:3], err[:3])
+    assert np.count_nonzero(ref.extra) == 3
 
 
 def test_area_weight_closed_form():

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lodprt.devices import host_array
 from lodprt.errors import LodprtError
 from lodprt.launches import KernelThreads
 
@@ -163,12 +164,10 @@ class DirectLight:
         lit = wp.zeros(A, dtype=wp.int32, device=dev)
         e = np.zeros(3) if eye is None else np.asarray(eye, np.float64)
         inputs = [
-            wp.array(np.asarray(vid, np.int32), dtype=wp.int32, device=dev), self.points, self.normals,
+            host_array(vid, np.int32, wp.int32, dev), self.points, self.normals,
             self.material_id, self.kd, self.ks, self.zonal, self.falloff, self.radius, self.mesh.id, self.offset,
-            wp.array(np.asarray(lights, np.float32), dtype=wp.vec3, device=dev),
-            wp.array(np.asarray(colors, np.float32), dtype=wp.vec3, device=dev),
-            wp.array(np.ascontiguousarray(light_slots, np.int32), dtype=wp.int32, device=dev),
-            wp.array(np.ascontiguousarray(light_weights, np.float32), dtype=wp.float32, device=dev),
+            host_array(lights, np.float32, wp.vec3, dev), host_array(colors, np.float32, wp.vec3, dev),
+            host_array(light_slots, np.int32, wp.int32, dev), host_array(light_weights, np.float32, wp.float32, dev),
             sample_vis, int(self.mode), wp.vec3(*map(float, e)), int(with_rad), int(eye_basis is not None),
             wp.empty((A, ncoef), dtype=wp.float32, device=dev),
             eye_basis if eye_basis is not None else wp.empty((A, ncoef), dtype=wp.float32, device=dev),

@@ -76,6 +76,7 @@ class CutRefinement:
         self.dirty, self.settled = True, False  # something changed since the cut settled; it has settled
         #: (N,) errors that add to the criterion's this frame (M-6: the actual light's shadow edges), or None
         self.extra: np.ndarray | None = None
+        self.extra_nodes: np.ndarray | None = None  # where ``set_extra`` last wrote it
         #: (N,) nodes kept split whatever their error (E-5: where a still frame's measured error is), and how many
         self.pinned, self.pins = np.zeros(h.num_nodes, bool), 0
 
@@ -87,6 +88,15 @@ class CutRefinement:
         self.fails[:] = 0
         self.retry_at[:] = 0
         self.pin(None)
+
+    def set_extra(self, nodes: np.ndarray, err: np.ndarray) -> None:
+        """``extra`` this frame: ``err`` at ``nodes``, 0 elsewhere (only the last frame's nodes are cleared)."""
+        if self.extra is None or len(self.extra) != self.h.num_nodes:
+            self.extra, self.extra_nodes = np.zeros(self.h.num_nodes, np.float32), None
+        if self.extra_nodes is not None:
+            self.extra[self.extra_nodes] = 0.0
+        self.extra[nodes] = err
+        self.extra_nodes = np.asarray(nodes, np.int64)
 
     def pin(self, nodes: np.ndarray | None) -> None:
         """E-5: keep ``nodes`` split from now on (None: pin none any more); the cut moves again."""
@@ -104,7 +114,7 @@ class CutRefinement:
         blocker has gone."""
         h, cut = self.h, self.cut
         V = h.num_vertices
-        act = np.flatnonzero(cut.active)
+        act = cut.nodes
         rc = act[act >= V]  # Refine-Candidates
         par = h.parent[act]
         first = (par >= 0) & (h.children[np.maximum(par, 0), 0] == act)  # each parent once, through its child 0

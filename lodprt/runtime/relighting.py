@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lodprt.devices import host_array
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION, DirectLight, check_interpolation
 from lodprt.runtime.inside import InsideCheck
 from lodprt.runtime.lights import LightInterpolator, check_lights
@@ -160,7 +161,7 @@ class Relighting:
             used, weights = frame_inputs()
             basis = wp.empty((A, self.ncoef), dtype=wp.float32, device=dev)  # toward the eye, filled by relight
             launch(kr.relight, A, [
-                wp.array(vid.astype(np.int32), dtype=wp.int32, device=dev), arrays["positions"], arrays["normals"],
+                host_array(vid, np.int32, wp.int32, dev), arrays["positions"], arrays["normals"],
                 wp.vec3(*map(float, eye)), used, weights, arrays["coeffs"], basis], [coef, rad])
             self.add_direct(vid, coef, eye=eye, radiance=rad, eye_basis=basis, launch=launch)  # M-1
             self.frame_lit = None if self.direct is None else self.direct.lit

@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from lodprt.devices import host_array
 from lodprt.errors import LodprtError
 from lodprt.launches import ROWS_MIN, KernelThreads
 from lodprt.runtime import frame_error, node_bounds
@@ -259,8 +260,8 @@ class Runtime:
         self._sync_device()
         weights = np.zeros((self.samples.slots, 3), np.float32)
         weights[self.used_slots] = self.sample_weights[self.used_samples]
-        used = wp.array(self.used_slots.astype(np.int32), dtype=wp.int32, device=self.device)
-        return used, wp.array(weights, dtype=wp.float32, device=self.device)
+        return (host_array(self.used_slots, np.int32, wp.int32, self.device),
+                host_array(weights, np.float32, wp.float32, self.device))
 
     @property
     def error_bound(self) -> float:
@@ -349,13 +350,13 @@ class Runtime:
             measured = self.motion_bound is not None  # E-5's still cut: its every pixel measured
             mode, geo_rate, area_ref, alpha = self.criterion.kernel_inputs(cam.width, cam.height, measured)
             self.launch_rows(kr.view_errors, K, [
-                wp.array(nodes, dtype=wp.int32, device=dev), self.h.num_vertices, d["positions"], d["vertex"],
+                host_array(nodes, np.int32, wp.int32, dev), self.h.num_vertices, d["positions"], d["vertex"],
                 d["children"], d["error_vector"], d["axis"], d["half"], d["radius"],
-                wp.array(self.planes.astype(np.float32), dtype=wp.vec4, device=dev),
+                host_array(self.planes, np.float32, wp.vec4, dev),
                 wp.mat44(*self.vp.astype(np.float32).ravel()), wp.vec3(*map(float, cam.eye)),
                 0.5 * cam.width, 0.5 * cam.height, math.hypot(cam.width, cam.height), self.focal_px(), used, weights,
                 *bounds, mode, int(self.interpolation != "thesis"),
-                wp.array(self.lighting.bracket_mask(), dtype=wp.int32, device=dev),
+                host_array(self.lighting.bracket_mask(), np.int32, wp.int32, dev),
                 2 if detail_only else int(bool(exact)),
                 float(self.error_bound), float(HYSTERESIS), geo_rate, area_ref, alpha,
                 wp.empty((K, self.ncoef), dtype=wp.float32, device=dev),
@@ -560,11 +561,7 @@ class Runtime:
             return area_weight(sphere_pixels(self.node_pos(nodes), self.radius[nodes], self.vp, focal), area_ref)
 
         nodes, err = shadow_edge_errors(self.h, self.cut.anc, vid, step, weight)
-        if ref.extra is None or len(ref.extra) != self.h.num_nodes:
-            ref.extra = np.zeros(self.h.num_nodes, np.float32)
-        else:
-            ref.extra[:] = 0.0
-        ref.extra[nodes] = err
+        ref.set_extra(nodes, err)
         over = bool((err > self.error_bound).any())
         ref.dirty = ref.dirty or over
         return over

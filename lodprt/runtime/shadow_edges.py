@@ -30,7 +30,8 @@ def sphere_pixels(centres: np.ndarray, radii: np.ndarray, vp: np.ndarray, focal_
     """The pixels ``pi r_px^2`` of bounding spheres on screen, ``r_px = r f / depth`` (1e18 when the eye is inside
     one or it lies behind the eye), as ``kernels.runtime.view_errors`` measures a node's footprint."""
     p = np.asarray(centres, np.float64)
-    depth = np.c_[p, np.ones(len(p))] @ np.asarray(vp, np.float64)[3]
+    row = np.asarray(vp, np.float64)[3]
+    depth = p @ row[:3] + row[3]  # the clip w of (p, 1)
     r = np.asarray(radii, np.float64)
     fp = np.where(depth > r, np.minimum(r * focal_px / np.maximum(depth, 1e-30), 1e9), 1e9)
     return np.pi * fp * fp
@@ -44,14 +45,16 @@ def straddling_steps(tri: np.ndarray, lit: np.ndarray, radiance: np.ndarray, whi
     step = np.zeros(A)
     if not len(tri) or not A:
         return step
-    t = np.asarray(tri, np.int64)
-    m = np.asarray(lit)[t]
-    cross = (m[:, 0] != m[:, 1]) | (m[:, 0] != m[:, 2])
-    if not cross.any():
+    t = np.asarray(tri)
+    m = np.take(np.asarray(lit), t)  # np.take: faster than fancy indexing
+    cross = np.flatnonzero((m[:, 0] != m[:, 1]) | (m[:, 0] != m[:, 2]))
+    if not len(cross):
         return step
-    t = t[cross]
-    r = np.asarray(radiance, np.float64)[t] / max(float(white), 1e-30)  # (T', 3 vertices, 3 channels)
-    d = np.maximum.reduce([np.abs(r[:, 0] - r[:, 1]), np.abs(r[:, 1] - r[:, 2]), np.abs(r[:, 2] - r[:, 0])]).max(1)
+    t = np.take(t, cross, axis=0)
+    r = np.take(np.asarray(radiance), t, axis=0).astype(np.float64) / max(float(white), 1e-30)  # (T', 3, 3)
+    a, b, c = r[:, 0], r[:, 1], r[:, 2]  # a channel's largest |L_a - L_b| is its largest less its least
+    d = np.maximum(a, np.maximum(b, c)) - np.minimum(a, np.minimum(b, c))  # (T', 3 channels)
+    d = np.maximum(d[:, 0], np.maximum(d[:, 1], d[:, 2]))  # (elementwise: numpy's max over a short axis is slow)
     np.maximum.at(step, t.ravel(), np.repeat(d, 3))
     return step
 

@@ -92,11 +92,21 @@ class CutMesh:
         self._pool = concurrent.futures.ThreadPoolExecutor(1) if background else None
         self._pending: concurrent.futures.Future | None = None
         self.waited = 0.0  # seconds the last ``take`` waited for the worker
+        self._vertices: tuple | None = None  # (nodes, their vertices): ``vertices``' last, for a read-only nodes
 
     def vertices(self, nodes: np.ndarray) -> np.ndarray:
-        """(A,) int32 ascending: the vertices of ``nodes`` that a face uses (one never drawn is not relit)."""
+        """(A,) int32 ascending, read-only: the vertices of ``nodes`` that a face uses (one never drawn is not
+        relit). Kept for the same ``nodes`` object (``Cut.nodes`` until the cut moves): the frame's relighting and
+        the worker's triangles ask for the same."""
+        last = self._vertices
+        if last is not None and last[0] is nodes:
+            return last[1]
         vid = np.sort(self.h.vertex[nodes]).astype(np.int32)  # ascending: gathers walk memory forward
-        return vid[self.referenced[vid]]
+        vid = vid[self.referenced[vid]]
+        vid.flags.writeable = False
+        if not nodes.flags.writeable:  # an array that cannot change under the same object
+            self._vertices = (nodes, vid)
+        return vid
 
     def __call__(self, cut) -> tuple[np.ndarray, np.ndarray]:
         """The mesh of ``cut`` now (in this thread)."""

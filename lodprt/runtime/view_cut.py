@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lodprt.devices import host_array
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, active_ancestors, concat_ranges, triangulate
 from lodprt.runtime.node_bounds import leaf_rings
@@ -31,7 +32,8 @@ def leaf_order_adjacency(h: Hierarchy, faces: np.ndarray) -> tuple[np.ndarray, n
 class Cut:
     """A front of active nodes: every original vertex has exactly one active ancestor-or-self.
 
-    ``active`` (N,) bool; ``anc`` (V,) int32 each original vertex's active node. ``refine``/``coarsen`` apply the
+    ``active`` (N,) bool; ``anc`` (V,) int32 each original vertex's active node (change them through the methods:
+    ``nodes`` is kept between moves). ``refine``/``coarsen`` apply the
     El-Sana & Varshney rules (docs/HIERARCHY.md) and return False, changing nothing, when a rule forbids the step;
     they raise LodprtError for a node id that does not exist. Their cost follows the node's subtree (its leaves
     are one slice of a depth-first order, their original edges one slice of a CSR table), never the mesh.
@@ -48,6 +50,7 @@ class Cut:
         self._nbr, self._ptr = leaf_order_adjacency(hierarchy, self.faces)
         self.anc = np.ascontiguousarray(active_ancestors(hierarchy, self.active), np.int32)
         self._dev: dict = {}  # per Warp device: the arrays of the sequential kernels (``_device_arrays``)
+        self._active_nodes: np.ndarray | None = None  # ``nodes`` until the cut moves (``moved``)
 
     @classmethod
     def full(cls, hierarchy: Hierarchy, faces) -> "Cut":
@@ -77,8 +80,19 @@ class Cut:
 
     @property
     def nodes(self) -> np.ndarray:
-        """(A,) int32 the active nodes."""
-        return np.flatnonzero(self.active).astype(np.int32)
+        """(A,) int32 the active nodes, ascending (read-only: kept until the cut moves, a frame asks for it several
+        times)."""
+        nodes = self._active_nodes
+        if nodes is None:
+            nodes = np.flatnonzero(self.active).astype(np.int32)
+            nodes.flags.writeable = False
+            self._active_nodes = nodes
+        return nodes
+
+    def moved(self) -> None:
+        """The cut's ``active`` changed: ``nodes`` is found again when next asked for (every method that moves the
+        cut calls it)."""
+        self._active_nodes = None
 
     def _check(self, node: int) -> int:
         node = int(node)
@@ -149,6 +163,7 @@ class Cut:
         if not self.can_refine(node):
             return False
         c0, c1 = self.h.children[node]
+        self.moved()
         self.active[node] = False
         self.active[c0] = self.active[c1] = True
         for c in (c0, c1):
@@ -166,6 +181,7 @@ class Cut:
 
     def _collapse(self, node: int) -> None:
         c0, c1 = self.h.children[node]
+        self.moved()
         self.active[c0] = self.active[c1] = False
         self.active[node] = True
         lo, hi = self.h.leaf_range[node]
@@ -186,6 +202,7 @@ class Cut:
     def _split(self, nodes: np.ndarray) -> None:
         """Make the children of ``nodes`` active in their place (no rule checked: the callers did)."""
         ch = self.h.children[nodes].ravel()
+        self.moved()
         self.active[nodes] = False
         self.active[ch] = True
         self._set_leaves(ch)
@@ -228,6 +245,7 @@ class Cut:
             first[seg[bad][::-1]] = nb[bad][::-1]  # the first blocker of each node
             go = cand[legal]
             ch = h.children[go]
+            self.moved()
             self.active[ch.ravel()] = False
             self.active[go] = True
             self._set_leaves(go)
@@ -348,6 +366,7 @@ class Cut:
         return d
 
     def _device_back(self, d: dict, device: str) -> None:
+        self.moved()  # the sequential kernels moved the cut (in place on the CPU)
         if device != "cpu":
             self.active.view(np.uint8)[:] = d["active"].numpy()
             self.anc[:] = d["anc"].numpy()
@@ -369,7 +388,7 @@ class Cut:
         done = wp.zeros(K, dtype=wp.uint8, device=device)
         blocker = wp.zeros(K, dtype=wp.int32, device=device)
         wp.launch(kv.coarsen_list, dim=1, inputs=[
-            wp.array(nodes, dtype=wp.int32, device=device), d["children"], d["parent"], d["creation"],
+            host_array(nodes, np.int32, wp.int32, device), d["children"], d["parent"], d["creation"],
             d["leaf_order"], d["leaf_range"], d["edge_ptr"], d["edge_nbr"], d["active"], d["anc"]],
             outputs=[done, blocker], device=device)
         self._device_back(d, device)
@@ -389,7 +408,7 @@ class Cut:
             return 0
         d = self._device_arrays(device)
         wp.launch(kv.force_refine_list, dim=1, inputs=[
-            wp.array(nodes, dtype=wp.int32, device=device), -1 if max_splits is None else int(max_splits),
+            host_array(nodes, np.int32, wp.int32, device), -1 if max_splits is None else int(max_splits),
             d["children"], d["creation"], d["leaf_order"], d["leaf_range"], d["edge_ptr"], d["edge_nbr"],
             d["active"], d["anc"], d["stack"]], outputs=[d["result"]], device=device)
         self._device_back(d, device)
