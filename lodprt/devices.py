@@ -34,14 +34,6 @@ def warp():
     return wp
 
 
-def host_array(a, np_dtype, wp_dtype, device: str):
-    """``a`` as a Warp array of ``wp_dtype`` on ``device``: on the CPU a view of the numpy array (no copy; the Warp
-    array keeps it alive), elsewhere a copy. For a frame's small per-call inputs: a copy costs more than the launch."""
-    import numpy as np
-
-    return warp().array(np.ascontiguousarray(a, np_dtype), dtype=wp_dtype, device=device, copy=device != "cpu")
-
-
 def native_stderr(call) -> list[str]:
     """Run ``call()`` with file descriptor 2 (where native code prints) sent to a temporary file; its lines. When
     descriptor 2 cannot be redirected (closed), ``call()`` runs as it is and nothing is captured."""

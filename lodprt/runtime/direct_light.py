@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.devices import host_array
 from lodprt.errors import LodprtError
 from lodprt.launches import KernelThreads
+from lodprt.runtime.device_inputs import host_array
 
 INTERPOLATIONS = ("direct", "direct-agree", "direct-blend", "thesis")
 DEFAULT_INTERPOLATION = "direct"

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.devices import host_array
+from lodprt.runtime.device_inputs import host_array
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION, DirectLight, check_interpolation
 from lodprt.runtime.inside import InsideCheck
 from lodprt.runtime.lights import LightInterpolator, check_lights

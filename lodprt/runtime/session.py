@@ -24,13 +24,13 @@ import time
 
 import numpy as np
 
-from lodprt.devices import host_array
 from lodprt.errors import LodprtError
 from lodprt.launches import ROWS_MIN, KernelThreads
 from lodprt.runtime import frame_error, node_bounds
 from lodprt.runtime.node_bounds import NodeErrors, scaled_error_vectors
 from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
+from lodprt.runtime.device_inputs import host_array
 from lodprt.runtime.frames import Frame
 from lodprt.runtime.refinement import HYSTERESIS, CutRefinement, ErrorCache
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION

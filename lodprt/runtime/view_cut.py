@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.devices import host_array
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, active_ancestors, concat_ranges, triangulate
+from lodprt.runtime.device_inputs import host_array
 from lodprt.runtime.node_bounds import leaf_rings
 
 
