@@ -186,15 +186,22 @@ def retriangulate(
     slot: wp.array(dtype=wp.int32),  # In/out: (F,) position of the face in ``live``, -1 when degenerate
     live: wp.array(dtype=wp.int32),  # In/out: (F,) the non-degenerate faces, densely, first ``count[0]``
     count: wp.array(dtype=wp.int32),  # In/out: (1,) number of live faces
+    stamp: wp.array(dtype=wp.int32),  # In/out: (F,) the last call that mapped the face
+    call: int,  # In: this call's number (a face is mapped once per call)
 ):
     """T-3.2 incremental triangulation (one thread): the faces around the ``moved`` vertices are mapped again
     through the active ancestors; a face that became degenerate leaves the dense list (the last one takes its
-    place), one that stopped being degenerate is appended. The list is the cut's mesh in a deterministic order."""
+    place), one that stopped being degenerate is appended. The list is the cut's mesh in a deterministic order.
+    A face around two or three moved vertices is mapped at its first (``stamp``): a second visit would map it
+    to the same vertices and find its place in the list already right."""
     n = count[0]
     for k in range(moved.shape[0]):
         v = moved[k]
         for t in range(vf_ptr[v], vf_ptr[v + 1]):
             f = vf[t]
+            if stamp[f] == call:
+                continue
+            stamp[f] = call
             x = vertex[anc[faces[f, 0]]]
             y = vertex[anc[faces[f, 1]]]
             z = vertex[anc[faces[f, 2]]]

@@ -20,12 +20,15 @@ def rows(tri: np.ndarray) -> np.ndarray:
     return rot[np.lexsort(rot.T[::-1])]
 
 
-def test_incremental_faces_match_the_reference(bunny_floor, bunny_hierarchy, device):
+@pytest.mark.parametrize("calls", [0, np.iinfo(np.int32).max - 3])  # the call numbers start again mid-way
+def test_incremental_faces_match_the_reference(bunny_floor, bunny_hierarchy, device, calls):
     """Random forced splits and collapses, several cut moves between calls, an unchanged call, LOD off (every leaf)
     and back to the base: every call gives exactly ``triangulate``'s faces (same orientation, no duplicates), and
-    ``update`` reports a move exactly when the active ancestors changed."""
+    ``update`` reports a move exactly when the active ancestors changed. A face around several moved vertices is
+    mapped once a call (its stamp), also when the call numbers wrap."""
     h, faces = bunny_hierarchy, bunny_floor.faces
     tri = IncrementalTriangulation(h, faces, device)
+    tri.calls = int(calls)
     rng = np.random.default_rng(3)
     cut = Cut.base(h, faces)
     seen = None

@@ -37,6 +37,8 @@ class IncrementalTriangulation:
         self._state = [wp.zeros((F, 3), dtype=wp.int32, device=device),
                        wp.full(F, -1, dtype=wp.int32, device=device),
                        wp.zeros(F, dtype=wp.int32, device=device), wp.zeros(1, dtype=wp.int32, device=device)]
+        self._stamp = wp.full(F, -1, dtype=wp.int32, device=device)  # the call that last mapped each face
+        self.calls = 0  # kernel calls so far: the number of the last, which a face's stamp compares with
 
     def update(self, anc: np.ndarray) -> bool:
         """Map again the faces around the vertices whose active ancestor in ``anc`` (V,) changed since the last call
@@ -49,8 +51,13 @@ class IncrementalTriangulation:
         if not len(moved):
             return False
         a = wp.array(anc, dtype=wp.int32, device=self.device, copy=self.device != "cpu")
+        if self.calls == np.iinfo(np.int32).max:  # call numbers start again (after two billion updates)
+            self._stamp.fill_(-1)
+            self.calls = 0
+        self.calls += 1
         wp.launch(kv.retriangulate, dim=1, inputs=[wp.array(moved, dtype=wp.int32, device=self.device),
-                                                   *self._in, a, *self._state], device=self.device)
+                                                   *self._in, a, *self._state, self._stamp, self.calls],
+                  device=self.device)
         # seen only once mapped: an interruption before this line leaves them to map again (the kernel is idempotent)
         self._seen[moved] = anc[moved]
         return True
