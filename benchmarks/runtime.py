@@ -25,6 +25,12 @@ names one (quick: 100 x 100 floor, 2 x 1 x 1 samples, short paths).
    as in 1.: the rendering below is not timed), and the error of the frame against the full-resolution frame:
    both drawn by ``lodprt.render.Renderer`` as linear radiance images (every 10th frame, 400 x 300) and compared
    over the pixels either covers (relative RMSE and the 99th percentile of the per-pixel relative error).
+4. Frame-time budgets (B-2, ``Runtime(frame_ms=...)``, ``--frame-ms``): the default over the orbit (120 frames;
+   quick: 40) without a budget and under budgets of the full mesh's median frame (from 1.) / 4 and / 5, stepped in
+   lockstep with the full mesh; per run the median and mean ms, their ratios to the full mesh's in the same
+   lockstep, the share of frames in motion without an estimate that met the budget, median triangles, and the
+   image error against the full-mesh frame of the same camera and lights (both drawn at 800 x 600, PSNR clipped
+   at white, every 10th frame), beside E-3's estimate.
 """
 
 from __future__ import annotations
@@ -170,6 +176,50 @@ def sweep(store, device: str, frames: int, every: int) -> list[dict]:
     return rows
 
 
+def budget_runs(store, device: str, frames: int, every: int, full_ms: float) -> list[dict]:
+    """4.: the default without a budget and under ``full_ms`` / 4 and / 5 (B-2), in lockstep with the full mesh."""
+    from lodprt.display.compare import frame_error
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.camera import camera_path
+
+    budgets = {"none": None, "full / 4": full_ms / 4, "full / 5": full_ms / 5}
+    rts = {name: Runtime(store, device=device, frame_ms=ms) for name, ms in budgets.items()}
+    full = Runtime(store, lod=False, device=device)
+    stats = {name: [] for name in [*rts, "full"]}
+    psnr = {name: [] for name in rts}
+    with Renderer() as renderer:
+        for k, (cam, lights) in enumerate(camera_path(full, "orbit", frames)):
+            made = {}
+            for name, rt in [*rts.items(), ("full", full)]:
+                rt.set_camera(cam)
+                rt.set_lights(lights)
+                made[name] = rt.update()
+                stats[name].append(made[name].stats)
+            if k % every == 0:
+                for name, rt in rts.items():
+                    psnr[name].append(frame_error(renderer, made[name], made["full"], rt.white)[0]["psnr_db"])
+    full_ms_all = [s["ms_total"] for s in stats["full"][1:]]
+    base = {"median": float(np.median(full_ms_all)), "mean": float(np.mean(full_ms_all))}
+    rows = []
+    for name, ms_budget in budgets.items():
+        later = stats[name][1:]
+        ms = np.array([s["ms_total"] for s in later])
+        timed = np.array([s["ms_total"] for s in later if s["budget_timed"]])  # the frames B-2 reads
+        est = [s["estimated_psnr_db"] for s in later if s["estimated_psnr_db"] is not None]
+        rows.append({"budget": name, "frame_ms": ms_budget, "median_ms": float(np.median(ms)),
+                     "mean_ms": float(ms.mean()), "full_median_ms": base["median"], "full_mean_ms": base["mean"],
+                     "ratio": base["median"] / float(np.median(ms)), "mean_ratio": base["mean"] / float(ms.mean()),
+                     "met": None if ms_budget is None else float(np.mean(timed <= ms_budget)),
+                     "median_triangles": float(np.median([s["triangles"] for s in later])),
+                     "median_bound": float(np.median([s["error_bound"] for s in later])),
+                     "median_psnr_db": float(np.median(psnr[name])), "min_psnr_db": float(np.min(psnr[name])),
+                     "median_estimated_psnr_db": float(np.median(est)) if est else None})
+        print(f"budget {name}: {rows[-1]['median_ms']:.2f} ms ({rows[-1]['ratio']:.2f}x the full mesh's "
+              f"{base['median']:.1f}), {rows[-1]['median_triangles']:,.0f} triangles, PSNR "
+              f"{rows[-1]['median_psnr_db']:.1f} dB (worst {rows[-1]['min_psnr_db']:.1f})", flush=True)
+    return rows
+
+
 def main():
     p = parser(__doc__.splitlines()[0])
     p.add_argument("--store", default=None, help="use this bake store instead of baking the thesis scene")
@@ -215,6 +265,8 @@ def main():
         cli_rows = cli_pairs({path.stem: path, "demo": demo_store(tmp)}, device, 1 if args.quick else CLI_PAIRS,
                              20 if args.quick else None)
         sweep_rows = sweep(store, device, 40 if args.quick else 120, 10)
+        full_orbit = next(x for x in rows if x["path"] == "orbit" and x["mode"] == "full mesh")["median_ms_total"]
+        budget_rows = budget_runs(store, device, 40 if args.quick else 120, 10, full_orbit)
         nv, nf = store.num_vertices, int(len(store.faces))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -236,10 +288,19 @@ def main():
     print(table(sweep_rows, [("error_bound", "error bound", ".3f"), ("median_triangles", "triangles", ",.0f"),
                              ("thesis_triangles", "thesis tri", ","), ("median_ms", "median ms", ".2f"),
                              ("rel_rmse", "image rRMSE", ".4f"), ("p99_rel_error", "p99 rel err", ".3f")]))
+    print()
+    shown = [{k: "" if v is None else v for k, v in r.items()} for r in budget_rows]
+    print(table(shown, [("budget", "frame budget", "s"), ("frame_ms", "ms", ".2f"),
+                              ("median_ms", "median ms", ".2f"), ("ratio", "vs full", ".2f"),
+                              ("mean_ms", "mean ms", ".2f"), ("mean_ratio", "vs full (mean)", ".2f"),
+                              ("met", "met", ".2f"), ("median_triangles", "triangles", ",.0f"),
+                              ("median_bound", "bound", ".3g"), ("median_psnr_db", "PSNR dB", ".1f"),
+                              ("min_psnr_db", "worst dB", ".1f"), ("median_estimated_psnr_db", "E-3 dB", ".1f")]))
     name = "runtime" + ("-quick" if args.quick else "")
     print("wrote", write(name, {"benchmark": "runtime", "quick": args.quick, "environment": environment(device),
                                 "vertices": nv, "faces": nf, "frames": frames,
                                 "init_seconds": init_s, "paths": rows, "cli": cli_rows, "sweep": sweep_rows,
+                                "budgets": budget_rows,
                                 "per_frame": paths}, args.json))
     import matplotlib
 

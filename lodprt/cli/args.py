@@ -127,6 +127,14 @@ def criterion(args):
     return criterion_of(args)
 
 
+def add_frame_ms(p: argparse.ArgumentParser) -> None:
+    """``--frame-ms``: the run time's frame-time budget (B-2, ``lodprt.runtime.budgets``)."""
+    p.add_argument("--frame-ms", type=float, default=None, metavar="MS",
+                   help="frame-time budget in milliseconds: while the frames in motion take longer, the view cut's "
+                        "bound gets a floor that rises (x1.25 a frame) until they fit, and falls again under 80%% of "
+                        "it (B-2); frames that estimate their error are not counted (default: none)")
+
+
 def add_outside(p: argparse.ArgumentParser) -> None:
     """``--outside clamp|error``: a light outside the store's light box (``lodprt info`` prints it)."""
     p.add_argument("--outside", choices=("clamp", "error"), default="clamp",

@@ -111,6 +111,7 @@ def _add_view(sub) -> None:
         "move the selected light; keys in docs/DISPLAY.md (H prints them). Needs a display (X11 or Xvfb).",
     )
     _add_view_args(vw, None, required=False)
+    cli_args.add_frame_ms(vw)
     vw.add_argument("--frames", type=int, default=None, metavar="N", help="close after N frames (smoke tests)")
     vw.add_argument("--screenshot", default=None, metavar="PNG", help="save the last frame drawn as a PNG")
     vw.set_defaults(handler=cmd_view)
@@ -234,4 +235,4 @@ def cmd_view(args) -> int:
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     return run_viewer(store, lights=lights, colors=colors, camera=camera, lod=not args.full, frames=args.frames,
-                      screenshot=args.screenshot, **_view_cut(args), **_draw_options(args))
+                      screenshot=args.screenshot, frame_ms=args.frame_ms, **_view_cut(args), **_draw_options(args))

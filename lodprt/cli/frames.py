@@ -9,7 +9,7 @@ from lodprt.cli import args as cli_args
 
 FRAME_KEYS = ("triangles", "active_nodes", "nodes_touched", "refined", "coarsened", "ms_cut", "ms_triangulate",
               "ms_relight", "ms_total", "shadow_rays",
-              "estimated_psnr_db", "error_bound")
+              "estimated_psnr_db", "error_bound", "bound_floor")
 
 
 def register(sub) -> None:
@@ -26,6 +26,7 @@ def register(sub) -> None:
     fr.add_argument("--frames", type=int, default=120, metavar="N", help="number of frames (default 120)")
     cli_args.add_view_cut(fr)
     fr.add_argument("--triangle-budget", type=int, default=None, metavar="T", help="steer the bound toward this many triangles")
+    cli_args.add_frame_ms(fr)
     cli_args.add_light(fr, help="fixed light position(s) instead of the moving light")
     cli_args.add_screen(fr, size_what="screen size for e_geo")
     cli_args.add_device(fr, " of the per-frame kernels")
@@ -45,6 +46,7 @@ def cmd_frames(args) -> int:
     cli_args.at_least("--error-every", args.error_every, 0, " (0: no image error)")
     store = open_store(args.store)
     rt = _runtime(store, criterion=cli_args.criterion(args), triangle_budget=args.triangle_budget,
+                  frame_ms=args.frame_ms,
                   device=args.device, lod=not args.full, interpolation=args.interpolation, outside=args.outside)
     errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
@@ -107,7 +109,7 @@ def _frames_summary(args, rt, store, rows) -> dict:
                "first_frame_ms": rows[0]["ms_total"],
                "median_ms": float(np.median(ms)), "mean_ms": float(ms.mean()), "p95_ms": float(np.percentile(ms, 95)),
                "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
-               "device": rt.device}
+               "device": rt.device, "frame_ms_budget": rt.budgets.frame_ms}
     psnr = [r["psnr_db"] for r in rows if "psnr_db" in r]
     if psnr:
         summary["median_psnr_db"] = float(np.median(psnr))
@@ -127,6 +129,8 @@ def _print_frames(rows, summary, rt) -> None:
     what = "full mesh" if not summary["lod"] else f"{rt.criterion.name} criterion, bound {rt.error_bound:.3g}"
     if summary["lod"] and rt.target_psnr is not None:
         what += f" (steered toward an estimated {rt.target_psnr:g} dB)"
+    if summary["lod"] and rt.budgets.frame_ms is not None:
+        what += f", frame-time budget {rt.budgets.frame_ms:g} ms (B-2: the bound's floor {rt.budgets.floor:.3g})"
     print(f"{what}: median {summary['median_ms']:.2f} ms per frame after the first "
           f"({summary['first_frame_ms']:.0f} ms), mean {summary['mean_ms']:.2f} ms (frames with an estimate of "
           f"the error included), p95 {summary['p95_ms']:.2f} ms; median "

@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: the library's words for an argument, and the flag the command line has for it
-FLAGS = {"overwrite=True": "--overwrite"}
+FLAGS = {"overwrite=True": "--overwrite", "frame_ms ": "--frame-ms "}
 
 
 def as_flags(message: str) -> str:

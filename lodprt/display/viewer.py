@@ -35,6 +35,7 @@ from lodprt.runtime.camera import rotate_about
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.criteria import CRITERIA, make_criterion, resolve_criterion
+from lodprt.runtime.budgets import check_frame_ms
 from lodprt.runtime.sources import frame_source
 
 log = logging.getLogger(__name__)
@@ -335,7 +336,7 @@ class Viewer:
 
     def __init__(self, store, *, lights, camera, colors=None, criterion="screen",
                  interpolation: str = DEFAULT_INTERPOLATION, error_bound: float | None = None,
-                 alpha: float | None = None, target_psnr=None,
+                 alpha: float | None = None, target_psnr=None, frame_ms: float | None = None,
                  outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True):
@@ -343,6 +344,7 @@ class Viewer:
             from lodprt.runtime.lights import LightInterpolator
 
             LightInterpolator(store.light_positions, store.light_box, outside="error").clamp(lights)
+        check_frame_ms(frame_ms)  # a bad budget before the window
         _check_display()
         import moderngl_window
         from moderngl_window.conf import settings
@@ -363,8 +365,8 @@ class Viewer:
             self.window = moderngl_window.create_window_from_settings()
         except Exception as exc:  # no X server behind DISPLAY, no GLX, no OpenGL 3.3
             raise LodprtError(f"cannot open a window on DISPLAY={os.environ.get('DISPLAY')!r}: {exc}") from exc
-        self.source = frame_source(store, criterion=criterion, lod=lod,
-                                   interpolation=interpolation)  # after the window: fail fast
+        self.source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation,
+                                   frame_ms=frame_ms)  # after the window: fail fast
         w = self.window
         self.renderer = Renderer(w.ctx)
         self.overlay = _Overlay(w.ctx)

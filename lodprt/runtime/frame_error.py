@@ -558,11 +558,3 @@ def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
         per = (rms[:, near].max(1) if near.any() else rms.max(1)) * w.sum(0)[None]
     return per.max(1) ** 2
 
-
-def toward_budget(bound: float, triangles: int, budget: int) -> float:
-    """The bound steered toward a triangle budget: x1.25 above it, /1.1 under 80% of it, else unchanged."""
-    if triangles > budget:
-        return max(bound, 1e-4) * 1.25
-    if triangles < 0.8 * budget:
-        return bound / 1.1
-    return bound

@@ -28,6 +28,7 @@ from lodprt.errors import LodprtError
 from lodprt.launches import ROWS_MIN, KernelThreads
 from lodprt.runtime import frame_error, node_bounds
 from lodprt.runtime.node_bounds import NodeErrors, scaled_error_vectors
+from lodprt.runtime.budgets import FrameBudgets
 from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
 from lodprt.runtime.device_inputs import host_array
@@ -65,14 +66,15 @@ class Runtime:
     this estimated PSNR against the full mesh, E-1..E-5, ``error_bound`` the steering's start in motion; by
     default ``criteria.DEFAULT_TARGET_PSNR``, off ("off") when error_bound or triangle_budget is given alone);
     triangle_budget: when set, the bound is steered every frame (x1.25 above the budget, /1.1 below 80% of it)
-    so that the triangle count settles under the budget; white: the radiance shown as 1.0 (default: the 99th
-    percentile of the samples' view-averaged radiance); weighting / outside: light interpolation
-    (``lodprt.runtime.lights``); max_passes: refinement passes per frame after the first; lod=False: the full mesh;
-    device: the Warp device of the per-frame kernels (default: CUDA when present, else the CPU);
-    cache_bytes: completed light samples (and their per-node bounds) kept at most, in bytes (default 1 GiB; never
-    fewer than one frame's samples): a sample is completed (T-15) when the lights first give it a weight
-    (``lodprt.runtime.samples.SampleCache``);
-    progress(done, total): called as the light samples a frame needs are completed;
+    so that the triangle count settles under the budget (B-1); frame_ms: a frame-time budget in ms, a floor
+    under the bound that rises while the frames in motion take longer (B-2, ``lodprt.runtime.budgets``); white:
+    the radiance shown as 1.0 (default: the 99th percentile of the samples' view-averaged radiance); weighting /
+    outside: light interpolation (``lodprt.runtime.lights``); max_passes: refinement passes per frame after the
+    first; lod=False: the full mesh; device: the Warp device of the per-frame kernels (default: CUDA when present,
+    else the CPU); cache_bytes: completed light samples (and their per-node bounds) kept at most, in bytes
+    (default 1 GiB; never fewer than one frame's samples): a sample is completed (T-15) when the lights first give
+    it a weight (``lodprt.runtime.samples.SampleCache``); progress(done, total): called as the light samples a
+    frame needs are completed;
     interpolation: how a light between samples is lit (``lodprt.runtime.direct_light.INTERPOLATIONS``): "direct"
     (default: the light's direct Phong radiance in closed form times a shadow ray's visibility, plus the samples'
     interpolated residual, M-1, M-2), "direct-agree" (rays only where the samples disagree, M-3), "direct-blend"
@@ -81,7 +83,7 @@ class Runtime:
 
     def __init__(self, store, *, error_bound: float | None = None, alpha: float | None = None,
                  criterion: str | Criterion = "screen", pixel_tolerance: float | None = None,
-                 triangle_budget: int | None = None,
+                 triangle_budget: int | None = None, frame_ms: float | None = None,
                  white: float | None = None, weighting: str = "exact", outside: str = "clamp", max_passes: int = 1,
                  lod: bool = True, device: str | None = None, cache_bytes: int | None = None, progress=None,
                  interpolation: str = DEFAULT_INTERPOLATION, target_psnr: float | str | None = None):
@@ -112,9 +114,9 @@ class Runtime:
         self.normals = np.ascontiguousarray(store.normals, np.float32)
         self.bounds = np.array([self.positions.min(0), self.positions.max(0)], np.float64) if len(self.positions) \
             else np.zeros((2, 3))
-        if triangle_budget is not None and int(triangle_budget) < 1:
-            raise LodprtError(f"triangle_budget {triangle_budget}: must be >= 1")
-        self.triangle_budget = None if triangle_budget is None else int(triangle_budget)
+        self.budgets = FrameBudgets(triangle_budget, frame_ms, lowest=frame_error.BOUND_RANGE[0],
+                                    highest=frame_error.BOUND_RANGE[1])  # B-1, B-2
+        self.triangle_budget = self.budgets.triangles
         if int(max_passes) < 1:
             raise LodprtError(f"max_passes {max_passes}: must be >= 1")
         self.max_passes = int(max_passes)
@@ -270,7 +272,7 @@ class Runtime:
 
     @error_bound.setter
     def error_bound(self, value: float) -> None:
-        self.criterion = self.criterion.with_bound(value)
+        self.criterion = self.criterion.with_bound(self.budgets.limit(value))  # B-2: never under the floor
 
     @property
     def alpha(self) -> float:
@@ -472,9 +474,10 @@ class Runtime:
         refined, coarsened, touched, passes = counts
         steer += time.perf_counter() - t3  # M-6 (and its first-frame rounds) count as cut work
         t3 = time.perf_counter()
-        if self.triangle_budget is not None:  # steer the bound toward the budget
-            new = frame_error.toward_budget(self.error_bound, len(tri), self.triangle_budget)
-            self.error_bound, self.refinement.dirty = new, self.refinement.dirty or new != self.error_bound
+        new = self.budgets.after_frame(self.error_bound, len(tri), 1e3 * (t3 - t0),  # B-1, B-2
+                                       self.lod and not (estimating or settle or still))
+        if new != self.error_bound:
+            self.error_bound, self.refinement.dirty = new, True
         stats = {
             "triangles": int(len(tri)), "active_nodes": int(len(self.cut.nodes)), "vertices": int(len(vid)),
             "nodes_touched": int(touched), "refined": int(refined), "coarsened": int(coarsened),
@@ -485,6 +488,7 @@ class Runtime:
             "estimated_psnr_db": self.estimated_psnr,  # E-3 (None without a target_psnr)
             "estimate_stride_px": self.estimate_stride,  # its cells (1: every pixel, the first and still frames)
             "pinned_nodes": self.refinement.pins,  # E-5 (first and still frames)
+            **self.budgets.settings(),  # B-1, B-2: the budgets, and the bound's floor under a frame-time budget
             "ms_cut": 1e3 * (t1 - t0 + steer), "ms_triangulate": 1e3 * (t2 - t1 + waited),
             "ms_relight": 1e3 * (t3 - t2 - steer - waited), "ms_total": 1e3 * (t3 - t0),
         }

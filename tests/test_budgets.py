@@ -1,0 +1,123 @@
+"""The frame's budgets (``lodprt.runtime.budgets``): B-1's triangle budget and B-2's frame-time budget, as laws on
+given numbers and on a Runtime along a camera path."""
+
+import json
+
+import numpy as np
+import pytest
+
+from lodprt.errors import LodprtError
+from lodprt.runtime.budgets import DOWN, UP, FrameBudgets, check_frame_ms, toward_budget
+from lodprt.runtime.camera import camera_path
+from lodprt.runtime.frame_error import BOUND_RANGE
+from lodprt.runtime.session import Runtime
+from lodprt.store.bake_store import open_store
+
+
+@pytest.fixture(scope="module")
+def store(bunny_bake):
+    return open_store(bunny_bake)
+
+
+def test_triangle_budget_law():
+    """B-1: x1.25 over the budget, / 1.1 under 80% of it, kept between (and a bound of 0 can still rise)."""
+    assert toward_budget(0.5, 1001, 1000) == pytest.approx(0.5 * UP)
+    assert toward_budget(0.0, 1001, 1000) == pytest.approx(1e-4 * UP)
+    assert toward_budget(0.5, 799, 1000) == pytest.approx(0.5 / DOWN)
+    assert toward_budget(0.5, 800, 1000) == 0.5 and toward_budget(0.5, 1000, 1000) == 0.5
+
+
+def test_frame_time_floor_law():
+    """B-2 step by step against the law written out: m the mean of this timed frame and the last, the floor
+    1.25 max(floor, bound) over the budget (capped at the highest bound), / 1.1 under 80% of it, 0 once under
+    the lowest; untimed frames change nothing; the bound is never under the floor."""
+    b = FrameBudgets(frame_ms=10.0, lowest=0.01, highest=2.0)
+    assert b.after_frame(0.5, 100, 30.0, timed=False) == 0.5 and b.floor == 0.0 and b.smoothed is None
+    assert b.after_frame(0.5, 100, 30.0, timed=True) == pytest.approx(0.625)  # m = 30 > 10
+    assert b.floor == pytest.approx(0.625) and b.smoothed == 30.0
+    assert b.after_frame(0.3, 100, 12.0, timed=True) == pytest.approx(0.625 * UP)  # m = 21; the floor, not 0.3
+    assert b.after_frame(1.0, 100, 9.0, timed=True) == pytest.approx(1.25)  # m = 10.5 > 10: 1.25 max(0.78, 1)
+    assert b.floor == pytest.approx(1.25)
+    for _ in range(5):
+        b.after_frame(1.9, 100, 50.0, timed=True)
+    assert b.floor == 2.0  # capped at the highest bound
+    assert b.after_frame(0.1, 100, 500.0, timed=False) == 2.0 and b.floor == 2.0  # untimed: unchanged
+    b.after_frame(0.1, 100, 7.0, timed=True)  # m = (50 + 7) / 2 = 28.5: over, stays at the cap
+    assert b.floor == 2.0
+    b.after_frame(0.1, 100, 7.0, timed=True)  # m = 7 < 8: down
+    assert b.floor == pytest.approx(2.0 / DOWN) and b.limit(0.1) == pytest.approx(2.0 / DOWN)
+    assert b.limit(3.0) == 3.0
+    floors = []
+    for _ in range(80):
+        b.after_frame(0.1, 100, 1.0, timed=True)
+        floors.append(b.floor)
+    assert all(a >= c for a, c in zip(floors, floors[1:])) and floors[-1] == 0.0  # falls, then none
+    assert min(f for f in floors if f > 0) >= 0.01
+
+
+@pytest.mark.parametrize("bad", [0, -1, float("nan"), float("inf"), "fast", 2e6])
+def test_bad_frame_budget_names_the_field(store, bad):
+    with pytest.raises(LodprtError, match="frame_ms"):
+        check_frame_ms(bad)
+    with pytest.raises(LodprtError, match="frame_ms"):
+        Runtime(store, device="cpu", frame_ms=bad)
+
+
+def test_bad_triangle_budget_names_the_field(store):
+    with pytest.raises(LodprtError, match="triangle_budget"):
+        Runtime(store, device="cpu", triangle_budget=0)
+    with pytest.raises(LodprtError, match="triangle_budget"):
+        FrameBudgets(triangles="many")
+
+
+def _orbit(rt, frames: int) -> list:
+    out = []
+    for cam, lights in camera_path(rt, "orbit", frames, size=(320, 240)):
+        rt.set_camera(cam)
+        rt.set_lights(lights)
+        out.append(rt.update())
+    return out
+
+
+def test_a_budget_never_met_changes_no_frame(store):
+    """A budget no frame comes near leaves B-2's floor at 0: the frames are those of a Runtime without one,
+    triangle for triangle and value for value."""
+    plain = _orbit(Runtime(store, device="cpu"), 14)
+    rt = Runtime(store, device="cpu", frame_ms=1e6)
+    budgeted = _orbit(rt, 14)
+    for a, b in zip(plain, budgeted):
+        assert b.stats["bound_floor"] == 0.0 and b.stats["frame_ms_budget"] == 1e6
+        assert a.stats["error_bound"] == b.stats["error_bound"]
+        np.testing.assert_array_equal(a.triangles, b.triangles)
+        np.testing.assert_array_equal(a.radiance, b.radiance)
+
+
+def test_a_budget_always_missed_coarsens_to_the_highest_bound(store):
+    """A budget every frame misses raises the floor x1.25 a timed frame up to the steering's highest bound; the
+    bound follows it whatever E-4 steers toward, the cut ends coarser than without the budget, and the frames
+    still report E-3's estimate of what that costs."""
+    plain = _orbit(Runtime(store, device="cpu"), 40)
+    rt = Runtime(store, device="cpu", frame_ms=1e-3)
+    frames = _orbit(rt, 40)
+    floors = [f.stats["bound_floor"] for f in frames]
+    assert floors[0] == 0.0  # the first frame converges from the base, untimed
+    assert all(a <= c for a, c in zip(floors, floors[1:]))
+    rising = [c / a for a, c in zip(floors, floors[1:]) if a > 0 and c < BOUND_RANGE[1]]
+    assert all(r >= UP * (1 - 1e-9) or r == 1.0 for r in rising)
+    assert floors[-1] == BOUND_RANGE[1] and rt.error_bound == BOUND_RANGE[1]
+    assert all(f.stats["error_bound"] >= f.stats["bound_floor"] for f in frames[1:])
+    assert frames[-1].stats["triangles"] < plain[-1].stats["triangles"]
+    assert rt.estimated_psnr is not None and np.isfinite(rt.estimated_psnr)
+
+
+def test_cli_frames_takes_a_frame_budget(bunny_bake, capsys):
+    """`lodprt frames --frame-ms` reports the budget and the floor per frame; a bad budget is a one-line error."""
+    from lodprt.cli.main import main
+
+    assert main(["frames", str(bunny_bake), "--frames", "12", "--frame-ms", "0.001", "--size", "160", "120",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["summary"]["frame_ms_budget"] == 0.001
+    assert doc["frames"][0]["bound_floor"] == 0.0 and doc["frames"][-1]["bound_floor"] > 0
+    assert main(["frames", str(bunny_bake), "--frames", "2", "--frame-ms", "-1"]) == 2
+    assert "error: --frame-ms -1.0: must be a frame time in milliseconds" in capsys.readouterr().err
