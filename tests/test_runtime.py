@@ -530,3 +530,20 @@ def test_sliced_rows_give_the_frame_of_one_launch(store, monkeypatch):
     np.testing.assert_array_equal(a.coefficients, b.coefficients)
     np.testing.assert_array_equal(a.radiance, b.radiance)
     assert a.stats["estimated_psnr_db"] == b.stats["estimated_psnr_db"]
+
+
+def test_host_array_is_a_view_on_the_cpu(device):
+    """A frame's small kernel inputs: the values in the kernel's dtype; on the CPU a view of the numpy array when it
+    already has that dtype (no copy), elsewhere a copy."""
+    import warp as wp
+
+    from lodprt.runtime.device_inputs import host_array
+
+    held = np.arange(7, dtype=np.int32)[::-1].copy()
+    got = host_array(held, np.int32, wp.int32, device)
+    np.testing.assert_array_equal(got.numpy(), held)
+    assert np.shares_memory(got.numpy(), held) == (device == "cpu")
+    cast = host_array(np.arange(5, dtype=np.int64), np.int32, wp.int32, device)  # cast: a new array either way
+    assert cast.dtype == wp.int32 and cast.numpy().tolist() == [0, 1, 2, 3, 4]
+    pts = host_array(np.ones((3, 3)), np.float32, wp.vec3, device)
+    assert pts.shape == (3,) and np.allclose(pts.numpy(), 1.0)

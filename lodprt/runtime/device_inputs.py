@@ -7,9 +7,13 @@ from __future__ import annotations
 import numpy as np
 
 from lodprt.devices import warp
+from lodprt.launches import DEVICE, warp_view
 
 
 def host_array(a, np_dtype, wp_dtype, device: str):
-    """``a`` as a Warp array of ``wp_dtype`` on ``device``: on the CPU a view of the numpy array (no copy; the Warp
-    array keeps it alive, and the kernels only read it), elsewhere a copy."""
-    return warp().array(np.ascontiguousarray(a, np_dtype), dtype=wp_dtype, device=device, copy=device != "cpu")
+    """``a`` as a Warp array of ``wp_dtype`` on ``device``: on the CPU a view of the numpy array
+    (``lodprt.launches.warp_view``: no copy; the Warp array keeps it alive, and the kernels only read it), elsewhere
+    a copy."""
+    if device == DEVICE:
+        return warp_view(np.asarray(a, np_dtype), wp_dtype)
+    return warp().array(np.ascontiguousarray(a, np_dtype), dtype=wp_dtype, device=device)

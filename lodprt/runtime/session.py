@@ -37,7 +37,7 @@ from lodprt.runtime.refinement import HYSTERESIS, CutRefinement, ErrorCache
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
 from lodprt.runtime.samples import default_white
-from lodprt.runtime.shadow_edges import area_weight, shadow_edge_errors, sphere_pixels, straddling_steps
+from lodprt.runtime.shadow_edges import follow_shadow_edges
 from lodprt.runtime.triangulation import CutMesh
 from lodprt.runtime.view_cut import Cut
 
@@ -548,27 +548,8 @@ class Runtime:
         return vid, tri, coef, rad, counts
 
     def _shadow_edges(self, vid: np.ndarray, tri: np.ndarray, rad: np.ndarray) -> bool:
-        """M-6 from the relight of ``vid``: the errors of the nodes whose cut triangles straddle the actual lights'
-        shadow edges, for the next refinement passes (``CutRefinement.extra``; screen criterion, direct path, LOD
-        on). Returns whether one of them is over the bound (the cut must move)."""
-        lit = self.lighting.lit_rows(len(vid))
-        ref = self.refinement
-        if lit is None or not self.lod or self.criterion.name != "screen":
-            ref.extra = None
-            return False
-        step = straddling_steps(tri, lit, rad, self.white)
-        cam = self.camera
-        area_ref = self.criterion.area_ref(cam.width, cam.height)
-        focal = self.focal_px()
-
-        def weight(nodes):
-            return area_weight(sphere_pixels(self.node_pos(nodes), self.radius[nodes], self.vp, focal), area_ref)
-
-        nodes, err = shadow_edge_errors(self.h, self.cut.anc, vid, step, weight)
-        ref.set_extra(nodes, err)
-        over = bool((err > self.error_bound).any())
-        ref.dirty = ref.dirty or over
-        return over
+        """M-6 from the relight of ``vid`` (``shadow_edges.follow_shadow_edges``): whether the cut must move."""
+        return follow_shadow_edges(self, vid, tri, rad)
 
     def _relight(self, vid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, 3, ncoef) coefficients and (A, 3) radiance toward the eye of vertices ``vid``

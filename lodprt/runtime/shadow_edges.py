@@ -79,3 +79,28 @@ def shadow_edge_errors(h, anc: np.ndarray, vid: np.ndarray, step: np.ndarray, pi
     best = np.zeros(len(nodes))
     np.maximum.at(best, inv, vals)
     return nodes, best * pixels(nodes)
+
+
+def follow_shadow_edges(rt, vid: np.ndarray, tri: np.ndarray, rad: np.ndarray) -> bool:
+    """M-6 for the ``Runtime`` ``rt`` from the relight of its cut's vertices ``vid`` (triangles ``tri``, radiance
+    ``rad``): the errors of the nodes whose cut triangles straddle the actual lights' shadow edges, for the next
+    refinement passes (``CutRefinement.extra``; screen criterion, direct path, LOD on). Returns whether one of them
+    is over the bound (the cut must move)."""
+    lit = rt.lighting.lit_rows(len(vid))
+    ref = rt.refinement
+    if lit is None or not rt.lod or rt.criterion.name != "screen":
+        ref.extra = None
+        return False
+    step = straddling_steps(tri, lit, rad, rt.white)
+    cam = rt.camera
+    area_ref = rt.criterion.area_ref(cam.width, cam.height)
+    focal = rt.focal_px()
+
+    def weight(nodes):
+        return area_weight(sphere_pixels(rt.node_pos(nodes), rt.radius[nodes], rt.vp, focal), area_ref)
+
+    nodes, err = shadow_edge_errors(rt.h, rt.cut.anc, vid, step, weight)
+    ref.set_extra(nodes, err)
+    over = bool((err > rt.error_bound).any())
+    ref.dirty = ref.dirty or over
+    return over
