@@ -173,6 +173,20 @@ def runtime_sweep(r: dict) -> str:
     return md(["error bound", "triangles", "thesis figures 21-24", "median ms", "image rRMSE"], rows)
 
 
+def runtime_budgets(r: dict) -> str:
+    rows = []
+    for b in r["budgets"]:
+        budget = "none" if b["frame_ms"] is None else f"{b['budget']}: {f(b['frame_ms'])} ms"
+        met = "" if b["met"] is None else f"{100 * b['met']:.0f}%"
+        est = "" if b["median_estimated_psnr_db"] is None else f"{b['median_estimated_psnr_db']:.1f}"
+        rows.append([budget, f(b["median_ms"]), f"{b['ratio']:.2f}x", f(b["mean_ms"]), f"{b['mean_ratio']:.2f}x", met,
+                     n(b["median_triangles"]), f"{b['median_bound']:.3g}", f"{b['median_psnr_db']:.1f}",
+                     f"{b['min_psnr_db']:.1f}", est])
+    return md(["frame-time budget (B-2)", "median ms", "vs full (median)", "mean ms", "vs full (mean)",
+               "timed frames within it", "triangles", "median bound", "PSNR dB (median)", "PSNR dB (worst)",
+               "E-3 dB (median)"], rows)
+
+
 def light_spacing(r: dict) -> str:
     rows = [[row["grid"], n(row["samples"]), f"{row['spacing']:.3f}", f(row["bake_s"], 2), f(row["mib"]),
              pct(row["rmse_between"], 0), pct(row["rmse_between_t12"], 0), pct(row["rmse_on_samples"]),
@@ -384,6 +398,7 @@ TABLES = {
     "runtime": ("runtime", runtime),
     "runtime_cli": ("runtime", runtime_cli),
     "runtime_sweep": ("runtime", runtime_sweep),
+    "runtime_budgets": ("runtime", runtime_budgets),
     "light_spacing": ("light_spacing", light_spacing),
     "hierarchy": ("hierarchy", hierarchy),
     "scale_hierarchy": ("scale", scale_hierarchy),
