@@ -79,7 +79,7 @@ def _orbit(rt, frames: int) -> list:
     return out
 
 
-def test_a_budget_never_met_changes_no_frame(store):
+def test_a_budget_never_exceeded_changes_no_frame(store):
     """A budget no frame comes near leaves B-2's floor at 0: the frames are those of a Runtime without one,
     triangle for triangle and value for value."""
     plain = _orbit(Runtime(store, device="cpu"), 14)
