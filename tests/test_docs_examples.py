@@ -110,7 +110,7 @@ SUBS = {
     ("docs/RUNTIME.md", "lodprt radiance bunny.zarr --light 0.05 0.28 0.02 [--light ...] [--color R G B ...] "
      "[--interpolation direct|direct-agree|direct-blend|thesis] --eye 0 0.3 0.6 -o rad.npy"): [
         "SYNOPSIS", ("--frames 240", "--frames 3"), ("--frames 240", "--frames 3"), ("--frames 240", "--frames 3"),
-        ("--error-every 10", "--error-every 2")],
+        ("--frames 240", "--frames 3"), ("--error-every 10", "--error-every 2")],
     ("docs/GI.md", "lodprt bake scene.toml -o gi.zarr --bounces 2 --gi-rays 128 --threshold-deg 0.5 "
      "--indirect-threshold-deg 20"): [("--gi-rays 128", "--gi-rays 8"), ("--full ", "--full --gi-rays 8 ")],
     ("docs/GI.md", "from lodprt.precompute.bake import bake"): [("gi_rays=128", "gi_rays=8")],
