@@ -1,5 +1,6 @@
-"""The interactive viewer: its controls without a window, a clear error without a display, and a real window
-under a virtual X server (Xvfb) when one is installed."""
+"""The interactive viewer: its controls without a window, a clear error without a display, the real viewer loop
+on a headless EGL context (its picture against `lodprt render`'s, its keys, its overlay), and a real window under a
+virtual X server (Xvfb) when one is installed."""
 
 import dataclasses
 import os
@@ -277,3 +278,124 @@ def test_viewer_starts_draws_and_closes_under_xvfb(cut_store, xvfb, tmp_path):
     assert abs(share - eb.fraction(min(bound, 1.0))) < 0.05, (share, bound)
     above = img[y - SLIDER_ROW + 4:y - 4, x + 2:x + w - 2].astype(int)  # no alpha slider above it
     assert not ((above[..., 0] > 230) & (above[..., 1] > 180) & (above[..., 2] < 90)).any()
+
+
+def headless(store, **options):
+    """The real ``Viewer`` on moderngl-window's headless window (an EGL context: no DISPLAY, no events)."""
+    from lodprt.store.bake_store import open_store
+
+    cam = Camera(eye=(0.35, 0.45, 0.9), target=(0.0, 0.05, 0.0), width=240, height=180)
+    return Viewer(open_store(store), lights=[[0.05, 0.3, 0.1]], camera=cam, headless=True, **options)
+
+
+def window_image(viewer) -> np.ndarray:
+    w, h = viewer.window.buffer_size
+    return np.frombuffer(viewer.window.fbo.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
+
+
+def test_headless_viewer_draws_the_frame_lodprt_render_draws(cut_store, tmp_path, monkeypatch):
+    """The viewer's loop (its own run-time source, lights, camera, white and overlay) on an EGL context, without
+    DISPLAY: outside the overlay's text and sliders its first frame is `lodprt render`'s picture of the same lights
+    and camera (a second Runtime, the offscreen renderer), pixel for pixel; the overlay is drawn over it."""
+    from PIL import Image
+
+    from lodprt.display.pictures import render_to_file
+    from lodprt.store.bake_store import open_store
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    v = headless(cut_store)
+    try:
+        v.window.use()
+        v.step()
+        img = window_image(v).astype(int)
+        cam, lights = v.state.camera, v.state.lights
+    finally:
+        v.renderer.release()
+        v.window.destroy()
+    out = tmp_path / "render.png"
+    render_to_file(open_store(cut_store), out, lights=lights, camera=cam)
+    ref = np.asarray(Image.open(out)).astype(int)
+    assert img.shape == ref.shape == (180, 240, 3)
+    (eb,) = slider_layout(240, 180, alpha=False)
+    scene = np.ones((180, 240), bool)
+    scene[:80, :] = False  # the text box (five lines at most)
+    scene[int(eb.rect[1]) - 4:, :] = False  # the slider row
+    assert (ref[scene].max(1) > 60).mean() > 0.2  # the lit floor and bunny, not a blank picture
+    assert np.abs(img - ref)[scene].max() <= 1  # the same frame (1: the two contexts' rounding, at most)
+    box = img[:30, :120]
+    assert (box > 240).all(-1).any() and not np.array_equal(box, ref[:30, :120])  # white text drawn over it
+
+
+def test_headless_viewer_keys_reach_the_run_time(cut_store, monkeypatch):
+    """The real viewer's key handler (the headless window has no key codes of its own: each key stands in as its
+    name): ] raises the bound the run time gets (x 1.25), L switches the run time to the full mesh (every face
+    drawn, the overlay says so), Q ends the loop."""
+    from lodprt.store.bake_store import open_store
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    faces = len(open_store(cut_store).faces)
+    v = headless(cut_store, error_bound=0.5)  # a bound alone: fixed, not steered
+    keys = v.window.keys = _Names()
+    try:
+        v.window.use()
+        v.step()
+        lod_triangles = len(v.frame.triangles)
+        assert 0 < lod_triangles < faces and v.source.error_bound == 0.5
+        v._key(keys.RIGHT_BRACKET, keys.ACTION_PRESS, None)
+        v.state.orbit(0.05, 0.0)  # a new frame
+        v.step()
+        assert v.source.error_bound == 0.625 and len(v.frame.triangles) <= lod_triangles
+        v._key(keys.L, keys.ACTION_PRESS, None)
+        v.step()
+        assert len(v.frame.triangles) == faces
+        assert "full resolution" in v.overlay_text(len(v.frame.triangles)).splitlines()[0]
+        v._key(keys.Q, keys.ACTION_PRESS, None)
+        assert v.window.is_closing
+    finally:
+        v.renderer.release()
+        v.window.destroy()
+
+
+def test_headless_viewer_shows_the_frame_time_budget_and_its_floor(cut_store, monkeypatch):
+    """Under a frame-time budget no frame meets (1e-3 ms) the overlay shows the budget and the floor B-2 raised
+    over the frames in motion (x 1.25 a timed frame, from the bound it found); without a budget there is no such
+    line."""
+    monkeypatch.delenv("DISPLAY", raising=False)
+    for budget in (None, 1e-3):
+        v = headless(cut_store, frame_ms=budget)
+        try:
+            v.window.use()
+            for k in range(6):
+                if k:
+                    v.state.orbit(0.05, 0.0)  # in motion: B-2 times these frames
+                v.step()
+            text = v.overlay_text(len(v.frame.triangles))
+            floor = v.frame.stats["bound_floor"]
+        finally:
+            v.renderer.release()
+            v.window.destroy()
+        if budget is None:
+            assert "budget" not in text and floor is None
+        else:
+            assert floor > 0 and v.state.error_bound >= floor
+            assert f"budget 0.001 ms, bound floor {floor:.3g}" in text.splitlines()[2]
+
+
+def test_view_headless_command_writes_its_screenshot_without_a_display(cut_store, tmp_path, monkeypatch, capsys):
+    """`lodprt view --headless --frames 2 --screenshot` runs without DISPLAY and writes the last frame;
+    --headless without --frames and --frames 0 are one-line errors with exit code 2."""
+    from PIL import Image
+
+    from lodprt.cli.main import main
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    shot = tmp_path / "shot.png"
+    assert main(["view", str(cut_store), "--headless", "--frames", "2", "--size", "160", "120",
+                 "--screenshot", str(shot)]) == 0
+    assert "closed after 2 frames" in capsys.readouterr().out
+    assert np.asarray(Image.open(shot)).shape == (120, 160, 3)
+    for extra, said in ((["--headless"], "--headless needs --frames N"), (["--frames", "0"], "--frames 0")):
+        assert main(["view", str(cut_store)] + extra) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and said in err, err

@@ -108,11 +108,14 @@ def _add_view(sub) -> None:
         "view",
         help="interactive viewer (orbit, drag lights, the criterion's knobs, wireframe, LOD toggle)",
         description="Open a window on the store: drag to orbit, right-drag to pan, wheel to zoom, shift-drag to "
-        "move the selected light; keys in docs/DISPLAY.md (H prints them). Needs a display (X11 or Xvfb).",
+        "move the selected light; keys in docs/DISPLAY.md (H prints them). Needs a display (X11 or Xvfb), or "
+        "--headless: the same loop and overlay on an EGL context, no window (with --frames and --screenshot).",
     )
     _add_view_args(vw, None, required=False)
     cli_args.add_frame_ms(vw)
     vw.add_argument("--frames", type=int, default=None, metavar="N", help="close after N frames (smoke tests)")
+    vw.add_argument("--headless", action="store_true",
+                    help="no window: draw --frames N frames with the overlay on an EGL context (no DISPLAY needed)")
     vw.add_argument("--screenshot", default=None, metavar="PNG", help="save the last frame drawn as a PNG")
     vw.set_defaults(handler=cmd_view)
 
@@ -228,6 +231,10 @@ def cmd_view(args) -> int:
     from lodprt.display.viewer import run_viewer
     from lodprt.store.bake_store import open_store
 
+    if args.frames is not None and args.frames < 1:
+        raise LodprtError(f"--frames {args.frames}: must be at least 1")
+    if args.headless and args.frames is None:
+        raise LodprtError("--headless needs --frames N: there is no window to close")
     if args.screenshot is not None:
         from lodprt.display.pictures import check_output
 
@@ -235,4 +242,5 @@ def cmd_view(args) -> int:
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     return run_viewer(store, lights=lights, colors=colors, camera=camera, lod=not args.full, frames=args.frames,
-                      screenshot=args.screenshot, frame_ms=args.frame_ms, **_view_cut(args), **_draw_options(args))
+                      screenshot=args.screenshot, frame_ms=args.frame_ms, headless=args.headless,
+                      **_view_cut(args), **_draw_options(args))

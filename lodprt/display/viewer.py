@@ -13,10 +13,13 @@ Controls (also printed by H):
     M light markers    - / =  exposure - / + 1/2 stop            H help     Q / Escape quit
 
 The overlay (top left) shows triangles, vertices, the active criterion with its knobs (the error bound; alpha only
-for "thesis", the only criterion that reads it; under a target PSNR the frame's estimated PSNR, E-3), lights and
-the frame time (run-time update and draw); the sliders
-(bottom left) show the same knobs and follow the keys. Without a display it
-raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
+for "thesis", the only criterion that reads it; under a target PSNR the frame's estimated PSNR, E-3), under a
+frame-time budget the budget and the bound's floor (B-2), lights and the frame time (run-time update and draw); the
+sliders (bottom left) show the same knobs and follow the keys. Without a display it raises LodprtError saying what
+is missing (no DISPLAY, or no moderngl-window).
+
+``headless=True`` (``lodprt view --headless --frames N``) runs the same loop, overlay and screenshot on an EGL
+context (moderngl-window's headless window: no events, no DISPLAY needed), for servers and the tests.
 """
 
 from __future__ import annotations
@@ -125,11 +128,13 @@ def _slider_panel(sliders, values) -> tuple[object, tuple[int, int]]:
     return img, (left, top)
 
 
-def _check_display() -> None:
-    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+def _check_display(headless: bool) -> None:
+    if not headless and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise LodprtError("no display: DISPLAY is not set (run it on a desktop, over ssh -X, or under a virtual "
-                          "X server: xvfb-run -a lodprt view ...); offscreen pictures: lodprt render")
-    missing = [name for name in ("moderngl_window", "pyglet") if importlib.util.find_spec(name) is None]
+                          "X server: xvfb-run -a lodprt view ...); without a window: lodprt view --headless "
+                          "--frames N --screenshot PNG; offscreen pictures: lodprt render")
+    missing = [name for name in ("moderngl_window",) + (() if headless else ("pyglet",))
+               if importlib.util.find_spec(name) is None]
     if missing:
         raise LodprtError(f"the viewer needs {' and '.join(missing)}: pip install moderngl-window")
 
@@ -339,13 +344,13 @@ class Viewer:
                  alpha: float | None = None, target_psnr=None, frame_ms: float | None = None,
                  outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
-                 white: float | None = None, light_markers: bool = True):
+                 white: float | None = None, light_markers: bool = True, headless: bool = False):
         if outside == "error":  # the starting lights; a light dragged out of the box later is clamped
             from lodprt.runtime.lights import LightInterpolator
 
             LightInterpolator(store.light_positions, store.light_box, outside="error").clamp(lights)
         check_frame_ms(frame_ms)  # a bad budget before the window
-        _check_display()
+        _check_display(headless)
         import moderngl_window
         from moderngl_window.conf import settings
 
@@ -358,13 +363,16 @@ class Viewer:
                                  per_vertex=per_vertex, markers=light_markers, exposure=exposure)
         self.home = camera
         self.white = white
-        settings.WINDOW.update({"class": "moderngl_window.context.pyglet.Window", "gl_version": (3, 3),
+        kind = "headless" if headless else "pyglet"  # headless: an EGL context and framebuffer, no events
+        settings.WINDOW.update({"class": f"moderngl_window.context.{kind}.Window", "gl_version": (3, 3),
+                                "backend": "egl" if headless else None,
                                 "size": (camera.width, camera.height), "title": f"lodprt view {store.path.name}",
-                                "vsync": False, "resizable": True, "aspect_ratio": None})
+                                "vsync": False, "resizable": not headless, "aspect_ratio": None})
         try:
             self.window = moderngl_window.create_window_from_settings()
-        except Exception as exc:  # no X server behind DISPLAY, no GLX, no OpenGL 3.3
-            raise LodprtError(f"cannot open a window on DISPLAY={os.environ.get('DISPLAY')!r}: {exc}") from exc
+        except Exception as exc:  # no X server behind DISPLAY, no GLX or EGL, no OpenGL 3.3
+            where = "a headless EGL context" if headless else f"a window on DISPLAY={os.environ.get('DISPLAY')!r}"
+            raise LodprtError(f"cannot open {where}: {exc}") from exc
         self.source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation,
                                    frame_ms=frame_ms)  # after the window: fail fast
         w = self.window
@@ -456,18 +464,26 @@ class Viewer:
         w = self.window
         info = self.renderer.draw(self.frame, target=w.fbo, camera=s.camera, per_vertex=s.per_vertex,
                                   exposure=s.exposure, white=white, wireframe=s.wireframe, light_markers=s.markers)
-        st = self.frame.stats
-        text = (f"{info['triangles']:,} triangles, {len(self.frame.positions):,} vertices, "
-                f"{'LOD' if getattr(self.source, 'lod', False) else 'full resolution'}\n"
-                f"{s.knobs()}  exposure {s.exposure:+.1f}"
-                + (f"  estimated {st['estimated_psnr_db']:.1f} dB" if st.get("estimated_psnr_db") is not None else "")
-                + "\n"
-                f"light {s.selected + 1} of {len(s.lights)} at ({', '.join(f'{x:.3f}' for x in s.lights[s.selected])})\n"
-                f"update {self.ms_update:.0f} ms (cut {st.get('ms_cut', 0.0):.0f}), draw {self.ms_draw:.0f} ms  [H help]")
-        self.overlay.draw(text, w.buffer_size, s.sliders(), {"error_bound": s.error_bound, "alpha": s.alpha})
+        self.overlay.draw(self.overlay_text(info["triangles"]), w.buffer_size, s.sliders(),
+                          {"error_bound": s.error_bound, "alpha": s.alpha})
         self.ms_draw = 1e3 * (time.perf_counter() - t0)
         if info["gl_error"] != "GL_NO_ERROR":
             log.warning("OpenGL error: %s", info["gl_error"])
+
+    def overlay_text(self, triangles: int) -> str:
+        """The overlay's lines for the frame drawn (``triangles`` of it): the mesh, the criterion's knobs with E-3's
+        estimate, the frame-time budget (B-2) with the bound's floor, the selected light, the times."""
+        s, st = self.state, self.frame.stats
+        budget = st.get("frame_ms_budget")
+        floor = st.get("bound_floor") or 0.0
+        return (f"{triangles:,} triangles, {len(self.frame.positions):,} vertices, "
+                f"{'LOD' if getattr(self.source, 'lod', False) else 'full resolution'}\n"
+                f"{s.knobs()}  exposure {s.exposure:+.1f}"
+                + (f"  estimated {st['estimated_psnr_db']:.1f} dB" if st.get("estimated_psnr_db") is not None else "")
+                + ("" if budget is None else f"\nbudget {budget:.3g} ms, bound floor "
+                   + (f"{floor:.3g}" if floor > 0 else "off")) + "\n"
+                f"light {s.selected + 1} of {len(s.lights)} at ({', '.join(f'{x:.3f}' for x in s.lights[s.selected])})\n"
+                f"update {self.ms_update:.0f} ms (cut {st.get('ms_cut', 0.0):.0f}), draw {self.ms_draw:.0f} ms  [H help]")
 
     def screenshot(self, path) -> None:
         """The window's current picture (after ``step``) as a PNG."""
@@ -499,7 +515,8 @@ class Viewer:
 def run_viewer(store, *, frames: int | None = None, screenshot=None, **options) -> int:
     """``lodprt view``: open the window, loop, return the exit status (LodprtError when no display)."""
     viewer = Viewer(store, **options)
-    print(f"lodprt view: {store.path} - H prints the controls, Q quits")
+    print(f"lodprt view: {store.path} - " + ("headless, " + f"{frames} frames" if options.get("headless")
+                                              else "H prints the controls, Q quits"))
     n = viewer.run(frames, screenshot=screenshot)
     est = None if viewer.frame is None else viewer.frame.stats.get("estimated_psnr_db")
     print(f"lodprt view: closed after {n} frames ({viewer.state.knobs()}"
