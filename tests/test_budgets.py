@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from lodprt.errors import LodprtError
-from lodprt.runtime.budgets import DOWN, UP, FrameBudgets, check_frame_ms, toward_budget
+from lodprt.runtime.budgets import DOWN, UP, FrameBudgets, toward_budget
+from lodprt.runtime.settings import check_frame_ms
 from lodprt.runtime.camera import camera_path
 from lodprt.runtime.frame_error import BOUND_RANGE
 from lodprt.runtime.session import Runtime
@@ -21,10 +22,11 @@ def store(bunny_bake):
 
 def test_triangle_budget_law():
     """B-1: x1.25 over the budget, / 1.1 under 80% of it, kept between (and a bound of 0 can still rise)."""
-    assert toward_budget(0.5, 1001, 1000) == pytest.approx(0.5 * UP)
-    assert toward_budget(0.0, 1001, 1000) == pytest.approx(1e-4 * UP)
-    assert toward_budget(0.5, 799, 1000) == pytest.approx(0.5 / DOWN)
-    assert toward_budget(0.5, 800, 1000) == 0.5 and toward_budget(0.5, 1000, 1000) == 0.5
+    low = BOUND_RANGE[0]
+    assert toward_budget(0.5, 1001, 1000, low) == pytest.approx(0.5 * UP)
+    assert toward_budget(0.0, 1001, 1000, low) == pytest.approx(low * UP)
+    assert toward_budget(0.5, 799, 1000, low) == pytest.approx(0.5 / DOWN)
+    assert toward_budget(0.5, 800, 1000, low) == 0.5 and toward_budget(0.5, 1000, 1000, low) == 0.5
 
 
 def test_frame_time_floor_law():
@@ -67,7 +69,7 @@ def test_bad_triangle_budget_names_the_field(store):
     with pytest.raises(LodprtError, match="triangle_budget"):
         Runtime(store, device="cpu", triangle_budget=0)
     with pytest.raises(LodprtError, match="triangle_budget"):
-        FrameBudgets(triangles="many")
+        FrameBudgets(triangles="many", lowest=BOUND_RANGE[0], highest=BOUND_RANGE[1])
 
 
 def _orbit(rt, frames: int) -> list:

@@ -38,7 +38,7 @@ from lodprt.runtime.camera import rotate_about
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.criteria import CRITERIA, make_criterion, resolve_criterion
-from lodprt.runtime.budgets import check_frame_ms
+from lodprt.runtime.settings import check_frame_ms
 from lodprt.runtime.sources import frame_source
 
 log = logging.getLogger(__name__)

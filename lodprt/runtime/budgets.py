@@ -16,44 +16,17 @@ a frame that estimates its error (every 4 to 8 frames in motion) costs more, and
 
 from __future__ import annotations
 
-import math
-
-from lodprt.errors import LodprtError
+from lodprt.runtime.settings import check_frame_ms, check_triangle_budget
 
 #: B-1 and B-2's steps: up x1.25 when over the budget, down / 1.1 when under LOW of it
 UP, DOWN, LOW = 1.25, 1.1, 0.8
 
 
-def check_triangle_budget(value) -> int | None:
-    """``value`` as an int >= 1, or None; LodprtError naming triangle_budget otherwise."""
-    if value is None:
-        return None
-    try:
-        n = int(value)
-    except (TypeError, ValueError):
-        n = 0
-    if n < 1:
-        raise LodprtError(f"triangle_budget {value}: must be a whole number of triangles >= 1")
-    return n
-
-
-def check_frame_ms(value) -> float | None:
-    """``value`` as a float in (0, 1e6] ms, or None; LodprtError naming frame_ms otherwise."""
-    if value is None:
-        return None
-    try:
-        ms = float(value)
-    except (TypeError, ValueError):
-        ms = float("nan")
-    if not math.isfinite(ms) or not 0 < ms <= 1e6:
-        raise LodprtError(f"frame_ms {value}: must be a frame time in milliseconds in (0, 1e6]")
-    return ms
-
-
-def toward_budget(bound: float, triangles: int, budget: int) -> float:
-    """B-1: the bound steered toward a triangle budget: x1.25 above it, /1.1 under 80% of it, else unchanged."""
+def toward_budget(bound: float, triangles: int, budget: int, lowest: float) -> float:
+    """B-1: the bound steered toward a triangle budget: x1.25 above it (from ``lowest`` at least, the lowest
+    bound: x1.25 of 0 would stay 0), /1.1 under 80% of it, else unchanged."""
     if triangles > budget:
-        return max(bound, 1e-4) * UP
+        return max(bound, lowest) * UP
     if triangles < LOW * budget:
         return bound / DOWN
     return bound
@@ -64,7 +37,7 @@ class FrameBudgets:
     bound B-2 keeps the frame at or over (0: none), ``smoothed`` B-2's last m (ms; None before the first timed
     frame). ``lowest`` and ``highest``: the range of bounds (the steering's, ``frame_error.BOUND_RANGE``)."""
 
-    def __init__(self, triangles=None, frame_ms=None, *, lowest: float = 1e-4, highest: float = 8.0):
+    def __init__(self, triangles=None, frame_ms=None, *, lowest: float, highest: float):
         self.triangles = check_triangle_budget(triangles)
         self.frame_ms = check_frame_ms(frame_ms)
         self.lowest, self.highest = float(lowest), float(highest)
@@ -81,7 +54,7 @@ class FrameBudgets:
         """The bound for the next frame after one at ``bound`` with ``triangles`` that took ``ms`` (``timed``: in
         motion, without an estimate or pins; B-2 reads only those frames' times)."""
         if self.triangles is not None:
-            bound = toward_budget(bound, triangles, self.triangles)  # B-1
+            bound = toward_budget(bound, triangles, self.triangles, self.lowest)  # B-1
         self.timed = self.frame_ms is not None and bool(timed)
         if self.timed:  # B-2
             m = ms if self._last is None else 0.5 * (ms + self._last)

@@ -18,10 +18,10 @@ sliders come from ``KNOBS``.
 from __future__ import annotations
 
 import dataclasses
-import math
 import typing
 
 from lodprt.errors import LodprtError
+from lodprt.runtime.settings import check_alpha, check_bound, check_target, checked_number
 
 
 class Knob(typing.NamedTuple):
@@ -34,22 +34,6 @@ class Knob(typing.NamedTuple):
     help: str
     metavar: str
     parse: typing.Callable = float  # the CLI's type
-
-
-def check_bound(error_bound) -> float:
-    """``error_bound`` as a finite float >= 0; LodprtError naming it otherwise."""
-    e = float(error_bound)
-    if not e >= 0 or not math.isfinite(e):
-        raise LodprtError(f"error_bound {error_bound}: must be a finite number >= 0")
-    return e
-
-
-def check_alpha(alpha) -> float:
-    """T-14's ``alpha`` as a float in [0, 1]; LodprtError naming it otherwise."""
-    a = float(alpha)
-    if not 0.0 <= a <= 1.0:
-        raise LodprtError(f"alpha {alpha}: must lie in [0, 1]")
-    return a
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,17 +136,13 @@ class ScreenCriterion(Criterion):
     IGNORES: typing.ClassVar[tuple[str, ...]] = ("alpha",)  # as before the criterion objects: accepted, unread
 
     def __post_init__(self):
-        from lodprt.runtime.frame_error import check_target
-
         if isinstance(self.target_psnr, str) and self.target_psnr == "default":  # a bound given alone: fixed
             object.__setattr__(self, "target_psnr", DEFAULT_TARGET_PSNR if self.error_bound is None else None)
         if self.error_bound is None:
             object.__setattr__(self, "error_bound", SCREEN_BOUND)
         super().__post_init__()
-        p = float(self.pixel_tolerance)
-        if not p > 0 or not math.isfinite(p):
-            raise LodprtError(f"pixel_tolerance {self.pixel_tolerance}: must be a positive number of pixels")
-        object.__setattr__(self, "pixel_tolerance", p)
+        object.__setattr__(self, "pixel_tolerance", checked_number(
+            self.pixel_tolerance, "pixel_tolerance", "be a positive number of pixels", low=0.0, low_open=True))
         object.__setattr__(self, "target_psnr", check_target(self.target_psnr))
 
     def steered(self) -> bool:

@@ -38,7 +38,6 @@ import weakref
 
 import numpy as np
 
-from lodprt.errors import LodprtError
 
 #: E-4: raise the bound by this factor when the estimate is under SLACK of the budget; steps at most MAX_STEP
 RAISE = 1.15
@@ -48,20 +47,6 @@ MAX_STEP = 4.0
 REPROBE = 8
 #: the lowest and highest bounds the steering may reach (units of white)
 BOUND_RANGE = (1e-4, 8.0)
-
-
-def check_target(psnr) -> float | None:
-    """``psnr`` as a float in (0, 200] dB, or None (None or "off": no target); LodprtError naming the field
-    otherwise."""
-    if psnr is None or (isinstance(psnr, str) and psnr.strip().lower() == "off"):
-        return None
-    try:
-        p = float(psnr)
-    except (TypeError, ValueError):
-        p = float("nan")
-    if not math.isfinite(p) or not 0 < p <= 200:
-        raise LodprtError(f"target_psnr {psnr}: must be a PSNR in dB in (0, 200], or 'off'")
-    return p
 
 
 def psnr(sse: float, covered: float) -> float:

@@ -116,7 +116,6 @@ class Runtime:
             else np.zeros((2, 3))
         self.budgets = FrameBudgets(triangle_budget, frame_ms, lowest=frame_error.BOUND_RANGE[0],
                                     highest=frame_error.BOUND_RANGE[1])  # B-1, B-2
-        self.triangle_budget = self.budgets.triangles
         if int(max_passes) < 1:
             raise LodprtError(f"max_passes {max_passes}: must be >= 1")
         self.max_passes = int(max_passes)
@@ -273,6 +272,11 @@ class Runtime:
     @error_bound.setter
     def error_bound(self, value: float) -> None:
         self.criterion = self.criterion.with_bound(self.budgets.limit(value))  # B-2: never under the floor
+
+    @property
+    def triangle_budget(self) -> int | None:
+        """B-1's triangle budget (None: none)."""
+        return self.budgets.triangles
 
     @property
     def alpha(self) -> float:
