@@ -231,8 +231,7 @@ def cmd_view(args) -> int:
     from lodprt.display.viewer import run_viewer
     from lodprt.store.bake_store import open_store
 
-    if args.frames is not None and args.frames < 1:
-        raise LodprtError(f"--frames {args.frames}: must be at least 1")
+    cli_args.at_least("--frames", args.frames, 1)
     if args.headless and args.frames is None:
         raise LodprtError("--headless needs --frames N: there is no window to close")
     if args.screenshot is not None:
