@@ -243,6 +243,36 @@ def test_gi_and_compressed_stores_go_through_the_direct_path(box_shadow, tmp_pat
     assert dark.any() and np.median(got[dark]) > 0  # indirect light in the shadow
 
 
+@pytest.mark.warp_debug
+def test_kept_scratch_gives_what_fresh_scratch_gives(tmp_path, device):
+    """``DirectLight.scratch`` keeps the direct term's SH scratch between calls (a full frame would otherwise page
+    in two fresh arrays every frame): relighting row sets of growing, shrinking and changing sizes, with two
+    glossy lights (the reflection basis is used) and a moving eye, gives bit for bit what a Runtime relighting each
+    set first (fresh scratch) gives, and a smaller call reuses the memory a larger one made."""
+    from lodprt.runtime.session import Runtime
+
+    _, store = bake_grid(tmp_path, {"plane": grid_plane(41, 2.0)}, ks=0.3, threshold=None)
+    lights = np.array([[-0.13, 1.55, 0.07], [0.2, 1.45, -0.1]])
+    rng = np.random.default_rng(7)
+    kept = Runtime(store, device=device, lod=False)
+    kept.set_lights(lights)
+    sets = [np.arange(store.num_vertices), np.sort(rng.choice(store.num_vertices, 300, replace=False)),
+            np.arange(17), np.sort(rng.choice(store.num_vertices, 1200, replace=False))]
+    for k, ids in enumerate(sets):
+        eye = np.array([0.3 + 0.1 * k, 0.8, 1.2])
+        kept.set_camera(eye, np.zeros(3))
+        fresh = Runtime(store, device=device, lod=False)
+        fresh.set_lights(lights)
+        fresh.set_camera(eye, np.zeros(3))
+        for got, want in zip(kept.relit(ids), fresh.relit(ids)):
+            np.testing.assert_array_equal(got, want, err_msg=f"set {k}")
+        assert np.abs(want).max() > 0
+    direct = kept.lighting.direct
+    big = direct.scratch(store.num_vertices, store.coefficients_per_vertex)
+    small = direct.scratch(5, store.coefficients_per_vertex)
+    assert small[0].shape == (5, store.coefficients_per_vertex) and small[0].ptr == big[0].ptr
+
+
 def test_unknown_interpolation_is_a_clear_error(box_shadow):
     from lodprt.runtime.frames import light_coefficients
     from lodprt.runtime.session import Runtime

@@ -25,7 +25,7 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.launches import KernelThreads
-from lodprt.runtime.device_inputs import host_array
+from lodprt.runtime.device_inputs import host_array, zeros
 
 INTERPOLATIONS = ("direct", "direct-agree", "direct-blend", "thesis")
 DEFAULT_INTERPOLATION = "direct"
@@ -87,6 +87,7 @@ class DirectLight:
         self.residual = int(store.attrs.get("bounces", 0) or 0) > 0
         self.uses_visibility = self.mode != kdirect.RAYS
         self.lit = np.zeros(0, np.int32)  # the last ``add``'s rows: bit li where light li reaches them (M-6)
+        self._scratch: tuple = ()  # ``scratch``'s two arrays, kept between frames
 
     # -- per sample (M-2) ----------------------------------------------------------------------------------------
     def _at_sample(self, sample: int, target: np.ndarray | None = None, sign: float = 1.0) -> np.ndarray:
@@ -141,6 +142,19 @@ class DirectLight:
         return self._at_sample(sample, out), out
 
     # -- per frame (M-1) -----------------------------------------------------------------------------------------
+    def scratch(self, rows: int, ncoef: int, eye_basis=None) -> tuple:
+        """``direct_light``'s scratch for ``rows`` rows: (basis, eye basis), each (rows, ncoef) float32 (the given
+        ``eye_basis`` as the second when there is one). Kept between calls and grown by at least a quarter when a
+        call needs more rows: the kernel writes a row of them before it reads it, and fresh ones would be new pages
+        every frame (two 6.5 MB arrays on the full bunny scene). Not for two calls at once."""
+        wp = self.wp
+        have = self._scratch
+        if not have or have[0].shape[0] < rows or have[0].shape[1] != ncoef:
+            size = max(rows, have[0].shape[0] * 5 // 4 if have and have[0].shape[1] == ncoef else 0)
+            have = self._scratch = tuple(wp.empty((size, ncoef), dtype=wp.float32, device=self.device)
+                                         for _ in range(2))
+        return have[0][:rows], (have[1][:rows] if eye_basis is None else eye_basis)
+
     def add(self, vid, lights, colors, light_slots, light_weights, sample_vis, coeffs, *, eye=None, radiance=None,
             eye_basis=None, threads=None) -> int:
         """Add ``D V`` of (L, 3) ``lights`` with (L, 3) ``colors`` to ``coeffs`` (A, 3, ncoef) (Warp array, rows
@@ -160,8 +174,8 @@ class DirectLight:
         ncoef = coeffs.shape[2]
         with_rad = radiance is not None
         rad = radiance if with_rad else wp.zeros((1, 3), dtype=wp.float32, device=dev)
-        rays = wp.zeros(A, dtype=wp.int32, device=dev)
-        lit = wp.zeros(A, dtype=wp.int32, device=dev)
+        rays = zeros(A, np.int32, wp.int32, dev)
+        lit = zeros(A, np.int32, wp.int32, dev)
         e = np.zeros(3) if eye is None else np.asarray(eye, np.float64)
         inputs = [
             host_array(vid, np.int32, wp.int32, dev), self.points, self.normals,
@@ -169,8 +183,7 @@ class DirectLight:
             host_array(lights, np.float32, wp.vec3, dev), host_array(colors, np.float32, wp.vec3, dev),
             host_array(light_slots, np.int32, wp.int32, dev), host_array(light_weights, np.float32, wp.float32, dev),
             sample_vis, int(self.mode), wp.vec3(*map(float, e)), int(with_rad), int(eye_basis is not None),
-            wp.empty((A, ncoef), dtype=wp.float32, device=dev),
-            eye_basis if eye_basis is not None else wp.empty((A, ncoef), dtype=wp.float32, device=dev),
+            *self.scratch(A, ncoef, eye_basis),
         ]
         outputs = [coeffs, rad, rays, lit]
         if threads is None:

@@ -405,7 +405,7 @@ def hit_radiance(rt, corner_rows: np.ndarray, bary: np.ndarray, ids: np.ndarray,
     arr = lambda a, dtype: wp.array(np.ascontiguousarray(a, np.float32 if dtype != wp.int32 else np.int32),  # noqa
                                     dtype=dtype, device=dev, copy=copy)
     coef = np.ascontiguousarray(coef, np.float32)
-    rad = wp.zeros((R, 3), dtype=wp.float32, device=dev)
+    rad = wp.empty((R, 3), dtype=wp.float32, device=dev)  # hit_radiance writes every row (0 for no hit)
     rt.launch_rows(kr.hit_radiance, R, [
         arr(corner_rows, wp.int32), arr(bary, wp.vec3), arr(rt.positions[ids], wp.vec3),
         arr(rt.normals[ids], wp.vec3), wp.array(coef, dtype=wp.float32, device=dev, copy=copy),
@@ -465,8 +465,8 @@ def screen_hits(rt, mesh=None, stride: int | None = None) -> tuple[np.ndarray, n
     corner = ray(-1.0, 1.0)
     du, dv = (ray(1.0, 1.0) - corner) / cols, (ray(-1.0, -1.0) - corner) / rows
     mesh = rt.scene_bvh() if mesh is None else mesh
-    face = wp.zeros(cols * rows, dtype=wp.int32, device=rt.device)
-    bary = wp.zeros(cols * rows, dtype=wp.vec3, device=rt.device)
+    face = wp.empty(cols * rows, dtype=wp.int32, device=rt.device)  # first_hits writes every cell (-1: no hit)
+    bary = wp.empty(cols * rows, dtype=wp.vec3, device=rt.device)
     vec = lambda a: wp.vec3(*map(float, a))  # noqa: E731
     rt.launch_rows(kr.first_hits, cols * rows, [mesh.id, vec(eye), vec(corner), vec(du), vec(dv), cols],
                    [face, bary])  # sliced over the cores on the CPU

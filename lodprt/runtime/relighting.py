@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lodprt.runtime.device_inputs import host_array
+from lodprt.runtime.device_inputs import host_array, zeros
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION, DirectLight, check_interpolation
 from lodprt.runtime.inside import InsideCheck
 from lodprt.runtime.lights import LightInterpolator, check_lights
@@ -149,8 +149,8 @@ class Relighting:
         A = len(vid)
         self.frame_lit = None
         if not self.uses_samples:  # M-1 on a direct-only store: the direct term alone
-            coef = wp.zeros((A, 3, self.ncoef), dtype=wp.float32, device=dev)
-            rad = wp.zeros((A, 3), dtype=wp.float32, device=dev)
+            coef = zeros((A, 3, self.ncoef), np.float32, wp.float32, dev)
+            rad = zeros((A, 3), np.float32, wp.float32, dev)
             if A:
                 self.add_direct(vid, coef, eye=eye, radiance=rad, launch=launch)
                 self.frame_lit = self.direct.lit  # kept apart: coefficients() relights other vertices
