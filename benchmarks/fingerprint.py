@@ -2,8 +2,10 @@
 
 A benchmark script measures the lodprt (and ``lodprt.kernels``) modules it imports, directly or through other
 modules, and its own helper scripts in ``benchmarks/`` (``common.py``, ``table1.py``, ...). The files are found by
-reading the imports (every ``import`` statement, function-level ones included, and the code of string constants a
-script runs in a child process, e.g. ``python -c BAKE_CHILD``), not by running anything, so the fingerprint is a
+reading the imports (every ``import`` statement, function-level ones included, the code of string constants a
+script runs in a child process, e.g. ``python -c BAKE_CHILD``, and the modules it runs as programs, e.g.
+``[sys.executable, "-m", "lodprt", "frames", ...]``: ``lodprt.__main__``, so the whole command line), not by
+running anything, so the fingerprint is a
 function of the source tree alone: a docs edit (docstrings and comments included), a test or a module the benchmark
 never imports does not change it.
 The package's ``__init__`` modules on the way to an imported module count (they run on import). This file and the
@@ -50,12 +52,21 @@ def _imports(tree: ast.AST, here: str | None, is_package: bool, code_strings: bo
                 base = ".".join(parts + ([node.module] if node.module else []))
             names.add(base)
             names.update(f"{base}.{a.name}" for a in node.names)
+        elif code_strings and isinstance(node, (ast.List, ast.Tuple)):
+            names.update(_run_as_main(node))
         elif code_strings and isinstance(node, ast.Constant) and isinstance(node.value, str) and "import" in node.value:
             try:
                 names |= _imports(ast.parse(node.value), None, False, False)
             except SyntaxError:
                 pass
     return names
+
+
+def _run_as_main(node: ast.List | ast.Tuple) -> set[str]:
+    """The modules a command line written as a list or tuple literal runs with ``-m`` (``"-m", "lodprt"`` ->
+    ``lodprt`` and ``lodprt.__main__``): a child process a benchmark starts runs that code as surely as an import."""
+    items = [e.value if isinstance(e, ast.Constant) and isinstance(e.value, str) else None for e in node.elts]
+    return {f"{m}{tail}" for k, m in zip(items, items[1:]) if k == "-m" and m for tail in ("", ".__main__")}
 
 
 def _parents(name: str) -> list[str]:

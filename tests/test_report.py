@@ -80,6 +80,25 @@ def test_fingerprint_covers_what_the_benchmark_imports(tmp_path):
     assert len(fp) == 16
 
 
+def test_fingerprint_covers_a_module_run_as_a_program(tmp_path):
+    """A benchmark that runs ``[sys.executable, "-m", "lodprt", ...]`` in a child measures ``lodprt.__main__`` and
+    what it imports (the command line), though it never imports them itself; an edit there moves its fingerprint."""
+    make_tree(tmp_path)
+    (tmp_path / "lodprt" / "__main__.py").write_text("from lodprt.cli import main\n")
+    (tmp_path / "lodprt" / "cli.py").write_text("def main():\n    from lodprt.unused import x\n")
+    script = tmp_path / "benchmarks" / "cmd.py"
+    script.write_text("import subprocess, sys\nCMD = [sys.executable, '-m', 'lodprt', 'frames']\n")
+    files = {p.relative_to(tmp_path).as_posix() for p in fingerprint.code_files(script, tmp_path)}
+    assert files == {"benchmarks/cmd.py", "lodprt/__init__.py", "lodprt/__main__.py", "lodprt/cli.py",
+                     "lodprt/unused.py"}
+    before, _ = fingerprint.code_fingerprint(script, tmp_path)
+    (tmp_path / "lodprt" / "unused.py").write_text("x = 2\n")
+    assert fingerprint.code_fingerprint(script, tmp_path)[0] != before
+    (tmp_path / "benchmarks" / "plain.py").write_text("ARGS = ['-m', 'x']\nimport lodprt.a\n")  # not lodprt: no file
+    assert "lodprt/__main__.py" not in {p.name for p in fingerprint.code_files(tmp_path / "benchmarks" / "plain.py",
+                                                                              tmp_path)}
+
+
 @pytest.mark.parametrize("rel, edit, changes", [
     ("kernels/k.py", "w = 0\n", True), ("lodprt/a.py", "w = 0\n", True), ("benchmarks/helper.py", "w = 0\n", True),
     ("kernels/k.py", "# a comment\n", False), ("docs/X.md", "more\n", False), ("README.md", "more\n", False)])
