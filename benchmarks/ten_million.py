@@ -11,7 +11,8 @@ most 1 KB per vertex):
 
 * ``bake``: ``lodprt bake SCENE.toml -o OUT.zarr``;
 * ``frames``: ``lodprt frames OUT.zarr --frames F --json`` (the default orbit at 800 x 600: opening the store,
-  completing the samples the moving light needs, the view cut each frame);
+  completing the samples the moving light needs, the view cut each frame; its summary keeps the frame times and,
+  apart, the samples setting the lights completed and their seconds);
 * ``view``: ``lodprt view OUT.zarr --frames 3 --screenshot PNG`` in a window under ``xvfb-run`` when it is
   installed, else ``--headless`` (the same loop, run-time frames and overlay on an EGL context, no window); the
   results say which (``view_mode``).
@@ -90,7 +91,9 @@ def run(folder: Path, floor: int, frames: int, name: str) -> dict:
     return {"vertices": V, "triangles": F, "store_bytes": store_bytes, "steps": steps,
             "view_mode": "window under xvfb-run" if xvfb else "headless (EGL)",
             "frames_summary": {k: summary[k] for k in ("median_ms", "p95_ms", "first_frame_ms", "median_triangles",
-                                                      "full_triangles", "error_bound", "target_psnr")}}
+                                                      "full_triangles", "error_bound", "target_psnr", "samples_completed",
+                                                      "samples_completed_at_open", "lights_seconds", "max_ms_lights",
+                                                      "sample_cache_slots", "light_samples")}}
 
 
 def plot(res: dict, path: Path) -> None:
@@ -138,6 +141,12 @@ def main() -> None:
     print(table(rows, [("step", "step", "s"), ("s", "seconds", ".1f"), ("peak GB", "peak GB", ".2f"),
                        ("B/vertex", "bytes per vertex", ".0f")]))
     print(f"view: {res['view_mode']}")
+    fs = res["frames_summary"]
+    print(f"frames: median {fs['median_ms']:.0f} ms a frame after the first ({fs['first_frame_ms'] / 1e3:.1f} s); "
+          f"setting the lights completed {fs['samples_completed']} light samples along the path in "
+          f"{fs['lights_seconds']:.1f} s (longest frame's {fs['max_ms_lights'] / 1e3:.1f} s), "
+          f"{fs['samples_completed_at_open']} at open; {fs['sample_cache_slots']} cache slots for "
+          f"{fs['light_samples']} samples")
     plot(res, plot_path(name))
     print(f"wrote {write(name, res, args.json)}")
 

@@ -494,6 +494,36 @@ def test_cli_frames_json(bunny_bake, capsys):
     assert main(["frames", str(bunny_bake), "--frames", "0"]) == 2
 
 
+def test_cli_frames_reports_the_samples_its_lights_complete(bunny_bake, capsys):
+    """`lodprt frames` reports, apart from the frame times, the light samples each frame's lights completed: with a
+    cache that holds every sample, each sample the path's lights reach is completed once (counted by a second
+    Runtime along the same path, from the samples it uses, not from the cache's count), and a still light completes
+    nothing after its first frame."""
+    import json
+
+    from lodprt.cli.main import main
+    from lodprt.runtime.camera import camera_path
+
+    assert main(["frames", str(bunny_bake), "--frames", "12", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    frames, summary = doc["frames"], doc["summary"]
+    assert all(f["ms_lights"] >= 0 and f["samples_completed"] >= 0 for f in frames)
+    assert summary["samples_completed"] == sum(f["samples_completed"] for f in frames)
+    assert summary["lights_seconds"] == pytest.approx(sum(f["ms_lights"] for f in frames) / 1e3)
+    assert summary["sample_cache_slots"] == summary["light_samples"]  # the small store's samples all fit
+    rt = Runtime(open_store(bunny_bake), device="cpu")
+    seen = set(rt.used_samples.tolist())
+    assert summary["samples_completed_at_open"] == len(seen)
+    for camera, lights in camera_path(rt, "orbit", 12):
+        rt.set_lights(lights)
+        seen |= set(rt.used_samples.tolist())
+    assert summary["samples_completed_at_open"] + summary["samples_completed"] == len(seen) > 1
+    still = open_store(bunny_bake).light_positions[0]
+    assert main(["frames", str(bunny_bake), "--frames", "4", "--light", *map(str, still), "--json"]) == 0
+    frames = json.loads(capsys.readouterr().out)["frames"]
+    assert [f["samples_completed"] for f in frames[1:]] == [0, 0, 0]
+
+
 def test_light_radiance_without_a_runtime(store, bunny_floor, tmp_path):
     """light_radiance equals Runtime.radiance, and works on a store baked without a hierarchy (full bake)."""
     from lodprt.precompute.bake import bake

@@ -1,9 +1,11 @@
 """``lodprt frames``: the view-dependent cut along a camera path, per-frame times and triangles (optionally the image
-error against the full mesh)."""
+error against the full mesh), and what setting each frame's lights cost: the light samples completed on the way
+(``ms_lights``, ``samples_completed``; not part of ``ms_total``, the frame's ``Runtime.update``)."""
 
 from __future__ import annotations
 
 import json
+import time
 
 from lodprt.cli import args as cli_args
 
@@ -19,7 +21,8 @@ def register(sub) -> None:
         help="run the view-dependent cut along a camera path and report per-frame times and triangles",
         description="Move the camera along a path around the scene (orbit, or dolly toward the target) while the "
         "lights circle above it, update the run-time cut every frame (no drawing) and print per-frame "
-        "milliseconds (cut update, triangulation, relighting) and triangle counts.",
+        "milliseconds (cut update, triangulation, relighting; apart: setting the lights, which completes the light "
+        "samples they reach that the sample cache does not hold) and triangle counts.",
     )
     cli_args.add_store(fr)
     fr.add_argument("--path", choices=("orbit", "dolly"), default="orbit", help="camera path (default orbit)")
@@ -50,20 +53,24 @@ def cmd_frames(args) -> int:
                   device=args.device, lod=not args.full, interpolation=args.interpolation, outside=args.outside)
     errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
+    at_open = rt.samples.completed  # completed while the Runtime opened (its default light)
     try:
         for k, (camera, lights) in enumerate(camera_path(rt, args.path, args.frames, size=tuple(args.size),
                                                          fov=args.fov)):
             rt.set_camera(camera)
-            rt.set_lights(args.light if args.light else lights)
+            done, t0 = rt.samples.completed, time.perf_counter()
+            rt.set_lights(args.light if args.light else lights)  # completes the samples the cache does not hold
+            lit = {"ms_lights": 1e3 * (time.perf_counter() - t0), "samples_completed": rt.samples.completed - done}
             frame = rt.update()
             s = frame.stats
-            rows.append({"frame": k, **{key: s[key] for key in FRAME_KEYS}})
+            rows.append({"frame": k, **{key: s[key] for key in FRAME_KEYS}, **lit})
             if errors is not None and k % args.error_every == 0:
                 rows[-1].update(errors.measure(frame))
     finally:
         if errors is not None:
             errors.close()
     summary = _frames_summary(args, rt, store, rows)
+    summary["samples_completed_at_open"] = at_open
     if args.json:
         print(json.dumps({"summary": summary, "frames": rows}, indent=2))
         return 0
@@ -109,7 +116,12 @@ def _frames_summary(args, rt, store, rows) -> dict:
                "first_frame_ms": rows[0]["ms_total"],
                "median_ms": float(np.median(ms)), "mean_ms": float(ms.mean()), "p95_ms": float(np.percentile(ms, 95)),
                "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
-               "device": rt.device, "frame_ms_budget": rt.budgets.frame_ms}
+               "device": rt.device, "frame_ms_budget": rt.budgets.frame_ms,
+               # setting the lights, apart from the frame times: the samples completed along the path and their time
+               "samples_completed": int(sum(r["samples_completed"] for r in rows)),
+               "lights_seconds": 1e-3 * float(sum(r["ms_lights"] for r in rows)),
+               "max_ms_lights": float(max(r["ms_lights"] for r in rows)),
+               "sample_cache_slots": int(rt.samples.slots), "light_samples": int(store.num_samples)}
     psnr = [r["psnr_db"] for r in rows if "psnr_db" in r]
     if psnr:
         summary["median_psnr_db"] = float(np.median(psnr))
@@ -120,12 +132,13 @@ def _frames_summary(args, rt, store, rows) -> dict:
 
 def _print_frames(rows, summary, rt) -> None:
     has_err = "median_psnr_db" in summary
-    print(f"{'frame':>5} {'triangles':>9} {'touched':>8} {'cut ms':>7} {'tri ms':>7} {'light ms':>8} {'total ms':>8}"
-          + (f" {'PSNR dB':>8}" if has_err else ""))
+    print(f"{'frame':>5} {'triangles':>9} {'touched':>8} {'cut ms':>7} {'tri ms':>7} {'relight ms':>10} {'total ms':>8}"
+          f" {'completed':>9} {'set lights ms':>13}" + (f" {'PSNR dB':>8}" if has_err else ""))
     for r in rows:
         err = f" {r['psnr_db']:>8.1f}" if "psnr_db" in r else (" " * 9 if has_err else "")
         print(f"{r['frame']:>5} {r['triangles']:>9,} {r['nodes_touched']:>8,} {r['ms_cut']:>7.2f} "
-              f"{r['ms_triangulate']:>7.2f} {r['ms_relight']:>8.2f} {r['ms_total']:>8.2f}{err}")
+              f"{r['ms_triangulate']:>7.2f} {r['ms_relight']:>10.2f} {r['ms_total']:>8.2f} "
+              f"{r['samples_completed']:>9} {r['ms_lights']:>13.1f}{err}")
     what = "full mesh" if not summary["lod"] else f"{rt.criterion.name} criterion, bound {rt.error_bound:.3g}"
     if summary["lod"] and rt.target_psnr is not None:
         what += f" (steered toward an estimated {rt.target_psnr:g} dB)"
@@ -135,6 +148,10 @@ def _print_frames(rows, summary, rt) -> None:
           f"({summary['first_frame_ms']:.0f} ms), mean {summary['mean_ms']:.2f} ms (frames with an estimate of "
           f"the error included), p95 {summary['p95_ms']:.2f} ms; median "
           f"{summary['median_triangles']:,.0f} triangles of {summary['full_triangles']:,} on {rt.device}")
+    print(f"setting the lights (not in the frame times): {summary['samples_completed']} light samples completed along "
+          f"the path in {summary['lights_seconds']:.2f} s (longest {summary['max_ms_lights']:.0f} ms), "
+          f"{summary['samples_completed_at_open']} at open; the sample cache ended with "
+          f"{summary['sample_cache_slots']} slots for the store's {summary['light_samples']} samples")
     if has_err:
         print(f"image error against the full mesh: median PSNR {summary['median_psnr_db']:.1f} dB (worst "
               f"{summary['min_psnr_db']:.1f}), median relative RMSE {summary['median_relative_rmse']:.4f}")
