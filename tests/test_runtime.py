@@ -505,8 +505,11 @@ def test_cli_frames_reports_the_samples_its_lights_complete(bunny_bake, capsys):
     from lodprt.runtime.camera import camera_path
 
     assert main(["frames", str(bunny_bake), "--frames", "12", "--json"]) == 0
-    doc = json.loads(capsys.readouterr().out)
+    out = capsys.readouterr()
+    doc = json.loads(out.out)
     frames, summary = doc["frames"], doc["summary"]
+    first = next(f["frame"] for f in frames if f["samples_completed"])  # a bar on stderr while a frame completes
+    assert f"frame {first}: completing light samples" in out.err
     assert all(f["ms_lights"] >= 0 and f["samples_completed"] >= 0 for f in frames)
     assert summary["samples_completed"] == sum(f["samples_completed"] for f in frames)
     assert summary["lights_seconds"] == pytest.approx(sum(f["ms_lights"] for f in frames) / 1e3)

@@ -59,7 +59,7 @@ def cmd_frames(args) -> int:
                                                          fov=args.fov)):
             rt.set_camera(camera)
             done, t0 = rt.samples.completed, time.perf_counter()
-            rt.set_lights(args.light if args.light else lights)  # completes the samples the cache does not hold
+            _set_lights(rt, args.light if args.light else lights, k)  # completes the samples the cache does not hold
             lit = {"ms_lights": 1e3 * (time.perf_counter() - t0), "samples_completed": rt.samples.completed - done}
             frame = rt.update()
             s = frame.stats
@@ -76,6 +76,28 @@ def cmd_frames(args) -> int:
         return 0
     _print_frames(rows, summary, rt)
     return 0
+
+
+def _set_lights(rt, lights, frame: int) -> None:
+    """``rt.set_lights(lights)`` with a transient bar on stderr while it completes light samples (seconds each at
+    millions of vertices, docs/SCALE.md), made when the first one is done (the cache reports each as it finishes)."""
+    from lodprt.cli.progress import new_bar
+
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = new_bar(total=total, unit="sample", desc=f"frame {frame}: completing light samples", leave=False)
+        bar.update(done - bar.n)
+
+    held, rt.samples.progress = rt.samples.progress, progress
+    try:
+        rt.set_lights(lights)
+    finally:
+        rt.samples.progress = held
+        if bar is not None:
+            bar.close()
 
 
 def _runtime(store, **options):
