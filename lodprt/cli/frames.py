@@ -69,8 +69,7 @@ def cmd_frames(args) -> int:
     finally:
         if errors is not None:
             errors.close()
-    summary = _frames_summary(args, rt, store, rows)
-    summary["samples_completed_at_open"] = at_open
+    summary = _frames_summary(args, rt, store, rows, at_open)
     if args.json:
         print(json.dumps({"summary": summary, "frames": rows}, indent=2))
         return 0
@@ -81,23 +80,15 @@ def cmd_frames(args) -> int:
 def _set_lights(rt, lights, frame: int) -> None:
     """``rt.set_lights(lights)`` with a transient bar on stderr while it completes light samples (seconds each at
     millions of vertices, docs/SCALE.md), made when the first one is done (the cache reports each as it finishes)."""
-    from lodprt.cli.progress import new_bar
+    from lodprt.cli.progress import ProgressBars
 
-    bar = None
-
-    def progress(done: int, total: int) -> None:
-        nonlocal bar
-        if bar is None:
-            bar = new_bar(total=total, unit="sample", desc=f"frame {frame}: completing light samples", leave=False)
-        bar.update(done - bar.n)
-
-    held, rt.samples.progress = rt.samples.progress, progress
-    try:
-        rt.set_lights(lights)
-    finally:
-        rt.samples.progress = held
-        if bar is not None:
-            bar.close()
+    held = rt.samples.progress
+    with ProgressBars(leave=False) as bars:
+        rt.samples.progress = bars.callback(f"frame {frame}: completing light samples", "sample")
+        try:
+            rt.set_lights(lights)
+        finally:
+            rt.samples.progress = held
 
 
 def _runtime(store, **options):
@@ -128,7 +119,7 @@ class _FrameErrors:
         self.renderer.release()
 
 
-def _frames_summary(args, rt, store, rows) -> dict:
+def _frames_summary(args, rt, store, rows, at_open: int) -> dict:
     import numpy as np
 
     ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
@@ -143,6 +134,7 @@ def _frames_summary(args, rt, store, rows) -> dict:
                "samples_completed": int(sum(r["samples_completed"] for r in rows)),
                "lights_seconds": 1e-3 * float(sum(r["ms_lights"] for r in rows)),
                "max_ms_lights": float(max(r["ms_lights"] for r in rows)),
+               "samples_completed_at_open": int(at_open),
                "sample_cache_slots": int(rt.samples.slots), "light_samples": int(store.num_samples)}
     psnr = [r["psnr_db"] for r in rows if "psnr_db" in r]
     if psnr:

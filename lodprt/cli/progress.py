@@ -33,17 +33,19 @@ class ProgressBars:
     """tqdm bars on stderr, one per name, each made at its first report (when its total is known).
 
     ``with ProgressBars() as bars: bake(..., progress=bars.callback("bake", "sample"))``; the bars are closed on leaving.
+    ``options`` go to every bar (``leave=False``: transient bars, gone once closed).
     """
 
-    def __init__(self):
+    def __init__(self, **options):
         self._bars = {}
+        self._options = options
 
     def callback(self, name: str, unit: str):
         """A ``progress(done, total)`` callback that advances the bar ``name`` counting ``unit``."""
 
         def update(done, total):
             if name not in self._bars:
-                self._bars[name] = new_bar(total=total, unit=unit, desc=name)
+                self._bars[name] = new_bar(total=total, unit=unit, desc=name, **self._options)
             self._bars[name].update(done - self._bars[name].n)
 
         return update
