@@ -23,7 +23,7 @@ def detail_bound(
     row: int,  # In: the node's row in detail
     used: wp.array(dtype=wp.int32),
     weights: wp.array2d(dtype=wp.float32),
-    detail: wp.array3d(dtype=wp.float32),
+    detail: wp.array3d(dtype=wp.float16),
     sharp: int,  # In: 0 sum_j |W_jc| D_jc (T-12 blends the samples); 1 max_j D_jc sum_j |W_jc| (M-5)
     bracket: wp.array(dtype=wp.int32),  # In: (S,) 1 for the slots whose detail the M-5 max takes (sharp = 1 only)
 ):
@@ -41,7 +41,7 @@ def detail_bound(
     for u in range(used.shape[0]):
         j = used[u]
         for c in range(channels):
-            det = detail[row, j, c]
+            det = wp.float32(detail[row, j, c])
             near = float(0.0)
             if sharp == 1:
                 if bracket[j] == 1:
@@ -135,7 +135,7 @@ def view_errors(
     box_centre: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box centre / white per node
     #                                                  and sample slot
     box_half: wp.array4d(dtype=wp.float16),  # In: (N - V, S, C, ncoef) coefficient box half-width / white
-    detail: wp.array3d(dtype=wp.float32),  # In: (N - V, S, C) S-2 bound of the completion residual / white
+    detail: wp.array3d(dtype=wp.float16),  # In: (N - V, S, C) S-2 bound of the completion residual / white
     criterion: int,  # In: the criterion's MODE (lodprt.runtime.criteria): 0 "screen" (S-1), 1 "thesis" (T-14)
     sharp: int,  # In: 1 for the direct interpolations (M-5: each sample's S-2 detail at full weight), 0 for T-12
     bracket: wp.array(dtype=wp.int32),  # In: (S,) M-5: 1 for the slots around the light (sharp = 1 only)

@@ -74,3 +74,37 @@ def test_detail_bound_holds_the_brute_force_maximum(case):
         assert worst <= bound * (1 + 1e-4) + 1e-6, (node, worst, bound)
         tight += bound <= np.sqrt(n) * worst + 1e-6
     assert tight == len(picks)  # Cauchy-Schwarz over at most sqrt(n) bands: never looser than that
+
+
+def float16_grid() -> np.ndarray:
+    """Every finite non-negative float16, as float64 (the oracle's table)."""
+    every = np.arange(1 << 16, dtype=np.uint16).view(np.float16)
+    return np.unique(every[np.isfinite(every) & (every >= 0)].astype(np.float64))
+
+
+def test_float16_up_is_the_smallest_float16_at_or_above_each_value():
+    from hypothesis import given, settings, strategies as st
+
+    from lodprt.runtime import node_bounds
+
+    grid = float16_grid()
+    edges = np.float32([0.0, 6e-8, 5.96e-8, 6.1e-5, 6.1035156e-05, 1e-30, 1.0, 1.0004883, 1.0001, 65504.0, 65519.0,
+                        65520.0, 3e38])
+
+    def check(x: np.ndarray) -> None:
+        got = node_bounds.float16_up(x)
+        assert got.dtype == np.float16 and got.shape == x.shape
+        xs = x.astype(np.float64).ravel()
+        want = grid[np.minimum(np.searchsorted(grid, xs), len(grid) - 1)]  # smallest float16 >= x, capped at 65504
+        np.testing.assert_array_equal(got.astype(np.float64).ravel(), want)
+
+    check(edges)
+    check(edges.reshape(-1, 1)[:12].reshape(4, 3))
+    check(np.zeros(0, np.float32))
+
+    @settings(max_examples=200, deadline=None)
+    @given(st.lists(st.floats(0, 1e6, width=32), min_size=1, max_size=50))
+    def fuzz(values):
+        check(np.float32(values))
+
+    fuzz()

@@ -271,6 +271,9 @@ def test_kept_scratch_gives_what_fresh_scratch_gives(tmp_path, device):
     big = direct.scratch(store.num_vertices, store.coefficients_per_vertex)
     small = direct.scratch(5, store.coefficients_per_vertex)
     assert small[0].shape == (5, store.coefficients_per_vertex) and small[0].ptr == big[0].ptr
+    given = small[1]  # a given eye basis is the second array, and the first is still the kept one
+    again = direct.scratch(5, store.coefficients_per_vertex, eye_basis=given)
+    assert again[1] is given and again[0].ptr == big[0].ptr and big[1].ptr != big[0].ptr
 
 
 def test_unknown_interpolation_is_a_clear_error(box_shadow):

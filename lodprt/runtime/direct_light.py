@@ -87,7 +87,7 @@ class DirectLight:
         self.residual = int(store.attrs.get("bounces", 0) or 0) > 0
         self.uses_visibility = self.mode != kdirect.RAYS
         self.lit = np.zeros(0, np.int32)  # the last ``add``'s rows: bit li where light li reaches them (M-6)
-        self._scratch: tuple = ()  # ``scratch``'s two arrays, kept between frames
+        self._scratch: list = [None, None]  # ``scratch``'s arrays, kept between frames
 
     # -- per sample (M-2) ----------------------------------------------------------------------------------------
     def _at_sample(self, sample: int, target: np.ndarray | None = None, sign: float = 1.0) -> np.ndarray:
@@ -114,7 +114,15 @@ class DirectLight:
             wp.launch(kshade.phong_sh, dim=b - a, inputs=[self.points, self.normals, self.material_id, ids, vis[a:b],
                                                           self.kd_stored, self.ks, self.zonal, light, self.falloff,
                                                           self.radius, scratch], outputs=[direct], device=dev)
-            target[self.referenced[a:b]] += np.float32(sign) * direct.numpy()
+            ref, add = self.referenced[a:b], direct.numpy()
+            # the rows of a slice are sorted and usually consecutive: added in place (a view) without a gather
+            part = target[ref[0]:ref[-1] + 1] if ref[-1] - ref[0] == len(ref) - 1 else None
+            if part is None:
+                target[ref] += add if sign > 0 else -add
+            elif sign > 0:
+                part += add
+            else:
+                part -= add
 
         if dev == "cpu":  # a CPU launch runs on one thread: slices on every core
             with KernelThreads(None) as threads:
@@ -144,16 +152,18 @@ class DirectLight:
     # -- per frame (M-1) -----------------------------------------------------------------------------------------
     def scratch(self, rows: int, ncoef: int, eye_basis=None) -> tuple:
         """``direct_light``'s scratch for ``rows`` rows: (basis, eye basis), each (rows, ncoef) float32 (the given
-        ``eye_basis`` as the second when there is one). Kept between calls and grown by at least a quarter when a
-        call needs more rows: the kernel writes a row of them before it reads it, and fresh ones would be new pages
-        every frame (two 6.5 MB arrays on the full bunny scene). Not for two calls at once."""
-        wp = self.wp
-        have = self._scratch
-        if not have or have[0].shape[0] < rows or have[0].shape[1] != ncoef:
-            size = max(rows, have[0].shape[0] * 5 // 4 if have and have[0].shape[1] == ncoef else 0)
-            have = self._scratch = tuple(wp.empty((size, ncoef), dtype=wp.float32, device=self.device)
-                                         for _ in range(2))
-        return have[0][:rows], (have[1][:rows] if eye_basis is None else eye_basis)
+        ``eye_basis`` as the second when there is one, and then no second array is made). Kept between calls and
+        grown by at least a quarter when a call needs more rows: the kernel writes a row of them before it reads
+        it, and fresh ones would be new pages every frame (6.5 MB each on the full bunny scene). Not for two calls
+        at once."""
+        def kept(i: int):
+            have = self._scratch[i]
+            if have is None or have.shape[0] < rows or have.shape[1] != ncoef:
+                size = max(rows, have.shape[0] * 5 // 4 if have is not None and have.shape[1] == ncoef else 0)
+                have = self._scratch[i] = self.wp.empty((size, ncoef), dtype=self.wp.float32, device=self.device)
+            return have[:rows]
+
+        return kept(0), (kept(1) if eye_basis is None else eye_basis)
 
     def add(self, vid, lights, colors, light_slots, light_weights, sample_vis, coeffs, *, eye=None, radiance=None,
             eye_basis=None, threads=None) -> int:

@@ -521,8 +521,9 @@ def derive_mean_square(rt, levels: list | None = None) -> None:
     if "detail_ms" not in cache.derived:
         plan, white = rt.store.completion_plan(), rt.white
         levels = node_bounds.height_levels(h) if levels is None else levels
-        cache.derive("detail_ms", lambda c: node_bounds.detail_mean_square(h, c, white, plan, levels),
-                     h.num_nodes - h.num_vertices, (cache.C,), np.float32)
+        mean_square = node_bounds.detail_mean_square  # kept as float16, rounded up (``float16_up``)
+        cache.derive("detail_ms", lambda c: node_bounds.float16_up(mean_square(h, c, white, plan, levels)),
+                     h.num_nodes - h.num_vertices, (cache.C,), np.float16)
 
 
 def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
@@ -532,7 +533,7 @@ def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
     sum_j |W_jc| for a direct interpolation (M-5); the largest channel, squared."""
     cache, h = rt.samples, rt.h
     derive_mean_square(rt)
-    rms = np.sqrt(cache.derived["detail_ms"][0][nodes - h.num_vertices][:, rt.used_slots])  # (K, U, C)
+    rms = np.sqrt(cache.derived["detail_ms"][0][nodes - h.num_vertices][:, rt.used_slots].astype(np.float32))
     w = np.abs(rt.sample_weights[rt.used_samples])  # (U, 3)
     if rms.shape[2] == 1:
         rms = np.repeat(rms, 3, axis=2)

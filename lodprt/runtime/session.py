@@ -173,7 +173,8 @@ class Runtime:
 
     @property
     def detail(self) -> np.ndarray:
-        """S-2 detail bounds (N - V, slots, C) float32 (``lodprt.runtime.node_bounds.detail_bounds``)."""
+        """S-2 detail bounds (N - V, slots, C) float16, rounded up (``lodprt.runtime.node_bounds.detail_bounds``,
+        ``float16_up``)."""
         return self._node_bounds("detail")
 
     def _node_bounds(self, name: str) -> np.ndarray:
@@ -185,8 +186,9 @@ class Runtime:
             if key == "detail":
                 # S-2 (b)'s edges: the Cut's leaf-order adjacency (the same edges, no second copy)
                 plan, adj = self.store.completion_plan(), self.refinement.cut.leaf_adjacency
-                cache.derive("detail", lambda c: node_bounds.detail_bounds(h, c, white, plan, adj, levels), rows,
-                             (self.channels,), np.float32)
+                bound = node_bounds.detail_bounds
+                cache.derive("detail", lambda c: node_bounds.float16_up(bound(h, c, white, plan, adj, levels)),
+                             rows, (self.channels,), np.float16)
             else:
                 cache.derive("boxes", lambda c: node_bounds.coefficient_boxes(h, c, white, levels), rows,
                              (2, self.channels, self.ncoef), np.float16)
@@ -203,8 +205,7 @@ class Runtime:
         for name in ("detail", "box_centre", "box_half"):
             if ("boxes" if name != "detail" else name) in self.samples.derived:
                 arr = self._node_bounds(name)
-                self._d[name] = wp.array(arr, dtype=wp.float32 if name == "detail" else wp.float16, device=dev,
-                                         copy=dev != "cpu")
+                self._d[name] = wp.array(arr, dtype=wp.float16, device=dev, copy=dev != "cpu")
         self._synced = self.samples.version
 
     def _kernel_bounds(self, exact: bool) -> list:
@@ -213,7 +214,7 @@ class Runtime:
         need = set(self.criterion.NODE_BOUNDS) | ({"box_centre", "box_half"} if exact else set())
         if "placeholder" not in self._d:
             self._d["placeholder"] = self._wp.zeros((1, 1, 1, self.ncoef), dtype=self._wp.float16, device=self.device)
-            self._d["placeholder_detail"] = self._wp.zeros((1, 1, 1), dtype=self._wp.float32, device=self.device)
+            self._d["placeholder_detail"] = self._wp.zeros((1, 1, 1), dtype=self._wp.float16, device=self.device)
         out = []
         for name in ("box_centre", "box_half", "detail"):
             if name in need:
