@@ -399,3 +399,33 @@ def test_view_headless_command_writes_its_screenshot_without_a_display(cut_store
         assert main(["view", str(cut_store)] + extra) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and said in err, err
+
+
+def test_headless_viewer_shows_a_bar_while_a_moved_light_completes_samples(cut_store, monkeypatch, capsys):
+    """With the CLI's ``set_lights`` (`lodprt view`), a light moved onto a sample the run time does not hold yet
+    completes it with a transient bar on stderr; a frame that completes nothing prints none, and the sample
+    cache's own progress callback is back afterwards."""
+    from lodprt.cli.progress import set_lights_with_progress
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    v = headless(cut_store, set_lights=set_lights_with_progress)
+    try:
+        v.window.use()
+        v.step()
+        cache = v.source.samples
+        held, done = cache.progress, cache.completed
+        capsys.readouterr()
+        v.state.orbit(0.05, 0.0)  # the same lights: nothing to complete
+        v.step()
+        assert cache.completed == done and "completing light samples" not in capsys.readouterr().err
+        far = np.argmax(np.linalg.norm(v.source.store.light_positions - v.state.lights[0], axis=1))
+        assert far not in cache.slot_sample
+        v.state.lights[0] = v.source.store.light_positions[far]
+        v.state.dirty = True
+        v.step()
+        assert cache.completed > done and far in cache.slot_sample
+        assert "completing light samples" in capsys.readouterr().err
+        assert cache.progress is held
+    finally:
+        v.renderer.release()
+        v.window.destroy()

@@ -228,6 +228,7 @@ def cmd_turntable(args) -> int:
 
 
 def cmd_view(args) -> int:
+    from lodprt.cli.progress import set_lights_with_progress
     from lodprt.display.viewer import run_viewer
     from lodprt.store.bake_store import open_store
 
@@ -242,4 +243,4 @@ def cmd_view(args) -> int:
     lights, colors, camera = _view_setup(args, store)
     return run_viewer(store, lights=lights, colors=colors, camera=camera, lod=not args.full, frames=args.frames,
                       screenshot=args.screenshot, frame_ms=args.frame_ms, headless=args.headless,
-                      **_view_cut(args), **_draw_options(args))
+                      set_lights=set_lights_with_progress, **_view_cut(args), **_draw_options(args))

@@ -42,6 +42,7 @@ def register(sub) -> None:
 
 
 def cmd_frames(args) -> int:
+    from lodprt.cli.progress import set_lights_with_progress
     from lodprt.runtime.camera import camera_path
     from lodprt.store.bake_store import open_store
 
@@ -59,7 +60,8 @@ def cmd_frames(args) -> int:
                                                          fov=args.fov)):
             rt.set_camera(camera)
             done, t0 = rt.samples.completed, time.perf_counter()
-            _set_lights(rt, args.light if args.light else lights, k)  # completes the samples the cache does not hold
+            set_lights_with_progress(rt, args.light if args.light else lights,  # completes the samples not held
+                                     desc=f"frame {k}: completing light samples")
             lit = {"ms_lights": 1e3 * (time.perf_counter() - t0), "samples_completed": rt.samples.completed - done}
             frame = rt.update()
             s = frame.stats
@@ -75,20 +77,6 @@ def cmd_frames(args) -> int:
         return 0
     _print_frames(rows, summary, rt)
     return 0
-
-
-def _set_lights(rt, lights, frame: int) -> None:
-    """``rt.set_lights(lights)`` with a transient bar on stderr while it completes light samples (seconds each at
-    millions of vertices, docs/SCALE.md), made when the first one is done (the cache reports each as it finishes)."""
-    from lodprt.cli.progress import ProgressBars
-
-    held = rt.samples.progress
-    with ProgressBars(leave=False) as bars:
-        rt.samples.progress = bars.callback(f"frame {frame}: completing light samples", "sample")
-        try:
-            rt.set_lights(lights)
-        finally:
-            rt.samples.progress = held
 
 
 def _runtime(store, **options):

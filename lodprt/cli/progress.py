@@ -66,3 +66,21 @@ def with_progress(total: int, desc: str, unit: str, work):
         return work(lambda done, _total: bar.update(done - bar.n))
     finally:
         bar.close()
+
+
+def set_lights_with_progress(source, lights, colors=None, *, desc: str = "completing light samples") -> None:
+    """``source.set_lights(lights, colors)`` with a transient bar on stderr while it completes light samples
+    (seconds each at millions of vertices, docs/SCALE.md), made when the first one is done (the source's sample
+    cache reports each as it finishes; a source without one sets its lights as it is). The cache's own progress
+    callback is restored afterwards."""
+    cache = getattr(source, "samples", None)
+    if cache is None or not hasattr(cache, "progress"):
+        source.set_lights(lights, colors)
+        return
+    held = cache.progress
+    with ProgressBars(leave=False) as bars:
+        cache.progress = bars.callback(desc, "sample")
+        try:
+            source.set_lights(lights, colors)
+        finally:
+            cache.progress = held

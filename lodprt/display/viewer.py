@@ -344,7 +344,11 @@ class Viewer:
                  alpha: float | None = None, target_psnr=None, frame_ms: float | None = None,
                  outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
-                 white: float | None = None, light_markers: bool = True, headless: bool = False):
+                 white: float | None = None, light_markers: bool = True, headless: bool = False,
+                 set_lights=None):
+        #: ``set_lights(source, lights, colors)``: how a frame sets the lights (the CLI's shows a progress bar on
+        #: stderr while they complete light samples, seconds each on a store of millions of vertices)
+        self.set_lights = set_lights or (lambda source, lights, colors: source.set_lights(lights, colors))
         if outside == "error":  # the starting lights; a light dragged out of the box later is clamped
             from lodprt.runtime.lights import LightInterpolator
 
@@ -451,7 +455,7 @@ class Viewer:
             t0 = time.perf_counter()
             if (s.error_bound, s.alpha) != self.pushed:  # the user moved a knob (not every frame: a target's
                 self.source.set_error_bound(s.error_bound, s.alpha)  # steering keeps the bound it found, E-4)
-            self.source.set_lights(s.lights, s.colors)
+            self.set_lights(self.source, s.lights, s.colors)
             self.source.set_camera(s.camera)
             self.frame = self.source.update()
             s.error_bound = float(getattr(self.source, "error_bound", s.error_bound))  # the steered bound shows
