@@ -71,6 +71,27 @@ def test_two_lights_grow_the_cache_to_one_frame(store):
     np.testing.assert_allclose(rt.coefficients(), light_coefficients(store, lights)[2], rtol=1e-4, atol=1e-6)
 
 
+def test_progress_reports_before_the_first_sample_and_reporting_chains_and_restores(store):
+    """``progress`` hears (0, n) before the first of n completions and (i, n) after the i-th; within
+    ``reporting(cb)`` both it and ``cb`` hear them, and afterwards ``progress`` is the same object again."""
+    own, extra = [], []
+    rt = Runtime(store, device="cpu", lod=False, progress=lambda d, t: own.append((d, t)))
+    n = rt.samples.completed
+    assert own == [(i, n) for i in range(n + 1)]  # the opening's completions
+    held = rt.samples.progress
+    own.clear()
+    far = np.argmax(np.linalg.norm(store.light_positions - rt.light_positions[0], axis=1))
+    with rt.samples.reporting(lambda d, t: extra.append((d, t))):
+        rt.set_lights([store.light_positions[far]])
+        done = rt.samples.completed - n
+        rt.set_lights([store.light_positions[far]])  # held now: no report at all
+    assert done >= 1 and own == extra == [(i, done) for i in range(done + 1)]
+    assert rt.samples.progress is held
+    with pytest.raises(RuntimeError), rt.samples.reporting(extra.append):
+        raise RuntimeError("interrupted")
+    assert rt.samples.progress is held
+
+
 def test_default_white_reads_one_sample_at_a_time(store):
     w = default_white(store)
     dc = np.concatenate([np.abs(store.sample(k)[1][:, :, 0]).max(1) for k in range(store.num_samples)])

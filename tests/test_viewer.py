@@ -420,12 +420,30 @@ def test_headless_viewer_shows_a_bar_while_a_moved_light_completes_samples(cut_s
         assert cache.completed == done and "completing light samples" not in capsys.readouterr().err
         far = np.argmax(np.linalg.norm(v.source.store.light_positions - v.state.lights[0], axis=1))
         assert far not in cache.slot_sample
+        shown = []  # the overlay's text at each swap while the frame is made
+
+        def swap():
+            shown.append(v.overlay.tex["text"][0])
+            if len(shown) == 1:  # a control moved during the wait: kept, and it asks for the next frame
+                v.state.orbit(0.1, 0.0)
+
+        monkeypatch.setattr(v.window, "swap_buffers", swap)
         v.state.lights[0] = v.source.store.light_positions[far]
+        moved = v.state.lights.copy()
         v.state.dirty = True
         v.step()
-        assert cache.completed > done and far in cache.slot_sample
+        n = cache.completed - done
+        assert n >= 1 and far in cache.slot_sample
         assert "completing light samples" in capsys.readouterr().err
         assert cache.progress is held
+        # the window: the last frame with the notice, before the first sample and after each one
+        assert [t.splitlines()[-1] for t in shown] == [f"completing light samples: {i} of {n} done"
+                                                      for i in range(n + 1)]
+        assert all(t.splitlines()[0].endswith("LOD") for t in shown)  # over the last frame's overlay
+        assert v.state.dirty and np.array_equal(v.state.lights, moved)  # the orbit during the wait is not lost
+        eye = v.state.camera.eye
+        v.step()  # the next frame is made for the orbited camera, and says nothing more
+        assert not v.state.dirty and np.allclose(v.frame.camera.eye, eye) and len(shown) == n + 1
     finally:
         v.renderer.release()
         v.window.destroy()

@@ -84,8 +84,10 @@ def _runtime(store, **options):
     from lodprt.cli.progress import with_progress
     from lodprt.runtime.session import Runtime
 
-    return with_progress(store.num_samples, "completing light samples", "sample",
-                         lambda progress: Runtime(store, progress=progress, **options))
+    rt = with_progress(store.num_samples, "completing light samples", "sample",
+                       lambda progress: Runtime(store, progress=progress, **options))
+    rt.samples.progress = None  # that bar is closed: a later frame's completions show their own
+    return rt
 
 
 class _FrameErrors:

@@ -70,17 +70,11 @@ def with_progress(total: int, desc: str, unit: str, work):
 
 def set_lights_with_progress(source, lights, colors=None, *, desc: str = "completing light samples") -> None:
     """``source.set_lights(lights, colors)`` with a transient bar on stderr while it completes light samples
-    (seconds each at millions of vertices, docs/SCALE.md), made when the first one is done (the source's sample
-    cache reports each as it finishes; a source without one sets its lights as it is). The cache's own progress
-    callback is restored afterwards."""
+    (seconds each at millions of vertices, docs/SCALE.md), shown as the first one starts (the source's sample
+    cache reports each, ``SampleCache.reporting``; a source without one sets its lights as it is)."""
     cache = getattr(source, "samples", None)
-    if cache is None or not hasattr(cache, "progress"):
+    if cache is None:
         source.set_lights(lights, colors)
         return
-    held = cache.progress
-    with ProgressBars(leave=False) as bars:
-        cache.progress = bars.callback(desc, "sample")
-        try:
-            source.set_lights(lights, colors)
-        finally:
-            cache.progress = held
+    with ProgressBars(leave=False) as bars, cache.reporting(bars.callback(desc, "sample")):
+        source.set_lights(lights, colors)

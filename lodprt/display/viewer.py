@@ -15,8 +15,9 @@ Controls (also printed by H):
 The overlay (top left) shows triangles, vertices, the active criterion with its knobs (the error bound; alpha only
 for "thesis", the only criterion that reads it; under a target PSNR the frame's estimated PSNR, E-3), under a
 frame-time budget the budget and the bound's floor (B-2), lights and the frame time (run-time update and draw); the
-sliders (bottom left) show the same knobs and follow the keys. Without a display it raises LodprtError saying what
-is missing (no DISPLAY, or no moderngl-window).
+sliders (bottom left) show the same knobs and follow the keys. While a moved light completes light samples
+(seconds each on millions of vertices), the last frame stays up with a line saying how many are done. Without a
+display it raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
 
 ``headless=True`` (``lodprt view --headless --frames N``) runs the same loop, overlay and screenshot on an EGL
 context (moderngl-window's headless window: no events, no DISPLAY needed), for servers and the tests.
@@ -24,6 +25,7 @@ context (moderngl-window's headless window: no events, no DISPLAY needed), for s
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import importlib.util
 import logging
@@ -455,24 +457,47 @@ class Viewer:
             t0 = time.perf_counter()
             if (s.error_bound, s.alpha) != self.pushed:  # the user moved a knob (not every frame: a target's
                 self.source.set_error_bound(s.error_bound, s.alpha)  # steering keeps the bound it found, E-4)
-            self.set_lights(self.source, s.lights, s.colors)
+                self.pushed = (s.error_bound, s.alpha)
+            s.dirty = False  # a control moved while the window waits for light samples asks for the next frame
+            with self._completing():
+                self.set_lights(self.source, s.lights, s.colors)
             self.source.set_camera(s.camera)
             self.frame = self.source.update()
-            s.error_bound = float(getattr(self.source, "error_bound", s.error_bound))  # the steered bound shows
-            self.pushed = (s.error_bound, s.alpha)
-            s.lights = np.asarray(self.frame.lights, np.float64).copy()  # as the run time clamped them
+            if not s.dirty:  # what the run time made of the knobs and lights (nothing moved meanwhile)
+                s.error_bound = float(getattr(self.source, "error_bound", s.error_bound))  # the steered bound
+                self.pushed = (s.error_bound, s.alpha)
+                s.lights = np.asarray(self.frame.lights, np.float64).copy()  # as the run time clamped them
             self.ms_update = 1e3 * (time.perf_counter() - t0)
-            s.dirty = False
+        self._draw()
+
+    def _draw(self, notice: str | None = None) -> None:
+        """The frame and the overlay (with a ``notice`` line); before the first frame, the notice alone."""
+        s, w = self.state, self.window
         t0 = time.perf_counter()
+        if self.frame is None:
+            w.ctx.clear(0.0, 0.0, 0.0)
+            self.overlay.draw(notice or "", w.buffer_size)
+            return
         white = self.white or getattr(self.source, "white", None) or auto_white(self.frame.radiance)
-        w = self.window
         info = self.renderer.draw(self.frame, target=w.fbo, camera=s.camera, per_vertex=s.per_vertex,
                                   exposure=s.exposure, white=white, wireframe=s.wireframe, light_markers=s.markers)
-        self.overlay.draw(self.overlay_text(info["triangles"]), w.buffer_size, s.sliders(),
-                          {"error_bound": s.error_bound, "alpha": s.alpha})
+        text = self.overlay_text(info["triangles"]) + ("" if notice is None else f"\n{notice}")
+        self.overlay.draw(text, w.buffer_size, s.sliders(), {"error_bound": s.error_bound, "alpha": s.alpha})
         self.ms_draw = 1e3 * (time.perf_counter() - t0)
         if info["gl_error"] != "GL_NO_ERROR":
             log.warning("OpenGL error: %s", info["gl_error"])
+
+    def _completing(self):
+        """While the lights complete light samples (seconds each on a store of millions of vertices): the window
+        shows the last frame with how many are done, redrawn as each one is (``SampleCache.reporting``)."""
+        cache = getattr(self.source, "samples", None)
+        return contextlib.nullcontext() if cache is None else cache.reporting(self._show_completion)
+
+    def _show_completion(self, done: int, total: int) -> None:
+        w = self.window
+        w.use()
+        self._draw(f"completing light samples: {done} of {total} done")
+        w.swap_buffers()  # shows it (and takes the window's events meanwhile)
 
     def overlay_text(self, triangles: int) -> str:
         """The overlay's lines for the frame drawn (``triangles`` of it): the mesh, the criterion's knobs with E-3's

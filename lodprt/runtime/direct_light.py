@@ -115,14 +115,11 @@ class DirectLight:
                                                           self.kd_stored, self.ks, self.zonal, light, self.falloff,
                                                           self.radius, scratch], outputs=[direct], device=dev)
             ref, add = self.referenced[a:b], direct.numpy()
+            if sign != 1.0:
+                add *= np.float32(sign)
             # the rows of a slice are sorted and usually consecutive: added in place (a view) without a gather
-            part = target[ref[0]:ref[-1] + 1] if ref[-1] - ref[0] == len(ref) - 1 else None
-            if part is None:
-                target[ref] += add if sign > 0 else -add
-            elif sign > 0:
-                part += add
-            else:
-                part -= add
+            rows = slice(ref[0], ref[-1] + 1) if len(ref) and ref[-1] - ref[0] == len(ref) - 1 else ref
+            target[rows] += add
 
         if dev == "cpu":  # a CPU launch runs on one thread: slices on every core
             with KernelThreads(None) as threads:

@@ -35,13 +35,11 @@ def float16_up(x: np.ndarray) -> np.ndarray:
     most float16's largest finite value (65504). The sample cache keeps the S-2 bounds and E-1 mean squares in
     this form (half the bytes of float32, twice the samples held in the same ``cache_bytes``): a rounded-up bound
     is still a bound, larger by at most one float16 step (a factor 1 + 2^-10 above 6.1e-5, 6e-8 below it)."""
-    x = np.asarray(x, np.float32)
+    x = np.asarray(np.minimum(np.asarray(x, np.float32), np.finfo(np.float16).max), np.float32)  # capped: no overflow
     h = x.astype(np.float16)
     low = h.astype(np.float32) < x
-    if low.any():
-        h[low] = np.nextafter(h[low], np.float16(np.inf))
-    big = np.float16(np.finfo(np.float16).max)
-    return np.minimum(h, big, out=h) if h.size else h
+    h[low] = np.nextafter(h[low], np.float16(np.inf))
+    return h
 
 
 def detail_bounds(h, c: np.ndarray, white: float, plan, adjacency: tuple, levels: list) -> np.ndarray:

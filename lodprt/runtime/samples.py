@@ -7,6 +7,7 @@ per-node bounds) live in the same slots and are made with them.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import typing
 
@@ -117,6 +118,8 @@ class SampleCache:
         cap = self._capacity(len(want))  # >= len(want): one frame's samples always fit
         if len(missing) > empty and self.slots < cap:  # grow (doubling) before replacing anything, up to the cap
             self._grow(min(cap, max(self.slots + len(missing) - empty, 2 * self.slots)))
+        if missing and self.progress:  # before the first: a bar or a notice shows while it completes
+            self.progress(0, len(missing))
         for i, k in enumerate(missing):
             free = np.flatnonzero(self.last_used != self.clock)
             s = int(free[np.argmin(self.last_used[free])])  # empty slots read -1: taken first
@@ -126,6 +129,24 @@ class SampleCache:
             if self.progress:
                 self.progress(i + 1, len(missing))
         return np.array([where[int(k)] for k in samples], np.int32)
+
+    @contextlib.contextmanager
+    def reporting(self, callback):
+        """Within the block, ``callback(done, total)`` hears of the samples ``ensure`` completes too (after the
+        cache's own ``progress``): (0, n) before the first of n, (i, n) after the i-th; the cache's ``progress`` is
+        as it was afterwards."""
+        held = self.progress
+
+        def both(done, total):
+            if held:
+                held(done, total)
+            callback(done, total)
+
+        self.progress = both
+        try:
+            yield self
+        finally:
+            self.progress = held
 
     def _load(self, slot: int, sample: int) -> None:
         if self.slot_sample[slot] >= 0:
