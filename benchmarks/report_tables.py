@@ -261,7 +261,7 @@ def scale_workers(r: dict) -> str:
 def ten_million(r: dict) -> str:
     what = {"bake": "`lodprt bake scene.toml -o out.zarr`",
             "frames": f"`lodprt frames out.zarr --frames {r['frames']} --json`",
-            "view": "`lodprt view out.zarr --frames 3 --screenshot view.png` "
+            "view": f"`lodprt view out.zarr --path orbit --frames {r['frames']} --screenshot view.png` "
                     + ("(headless, EGL)" if r.get("view_mode", "").startswith("headless") else "(Xvfb)")}
     limit = {"bake": "12 GB", "frames": "1 KB per vertex", "view": "-"}
     rows = [[what[k], f(v["seconds"]), g(v["peak_bytes"] / 1e9), n(v["bytes_per_vertex"]), limit[k]]

@@ -13,9 +13,11 @@ most 1 KB per vertex):
 * ``frames``: ``lodprt frames OUT.zarr --frames F --json`` (the default orbit at 800 x 600: opening the store,
   completing the samples the moving light needs, the view cut each frame; its summary keeps the frame times and,
   apart, the samples setting the lights completed and their seconds);
-* ``view``: ``lodprt view OUT.zarr --frames 3 --screenshot PNG`` in a window under ``xvfb-run`` when it is
-  installed, else ``--headless`` (the same loop, run-time frames and overlay on an EGL context, no window); the
-  results say which (``view_mode``).
+* ``view``: ``lodprt view OUT.zarr --path orbit --frames F --screenshot PNG`` in a window under ``xvfb-run`` when
+  it is installed, else ``--headless`` (the same loop, run-time frames and overlay on an EGL context, no window);
+  the results say which (``view_mode``). The window plays the path ``frames`` times, its light moving the same
+  way, completing the same samples with the window's notice up while it waits; the viewer's closing summary
+  (``view_path``: median update and draw, the samples completed and their seconds, the longest wait) is kept.
 
 Writes benchmarks/results/ten_million[-quick].json, .png (bytes per vertex of each step against the 1 KB line) and
 -view.png (the viewer's screenshot).
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -54,6 +57,21 @@ def measured(cmd: list[str], cwd: Path, stdout=None) -> dict:
     return {"seconds": wall, "peak_bytes": usage.ru_maxrss * 1024}
 
 
+#: the line ``lodprt view --path`` prints when it closes (``lodprt.display.playback.summary_line``)
+PATH_LINE = re.compile(r"path (?P<path>\w+): (?P<frames>\d+) frames, median update (?P<median_ms_update>[0-9.]+) ms "
+                       r"and draw (?P<median_ms_draw>[0-9.]+) ms after the first \((?P<first_frame_ms>[0-9.]+) ms\); "
+                       r"setting the lights completed (?P<samples_completed>\d+) light samples in "
+                       r"(?P<lights_seconds>[0-9.]+) s \(longest frame's (?P<max_seconds_lights>[0-9.]+) s\)")
+
+
+def view_path(stdout: str) -> dict:
+    """The numbers of the viewer's closing path summary in ``stdout`` (a failure names what was printed)."""
+    m = PATH_LINE.search(stdout)
+    if m is None:
+        raise SystemExit(f"ten_million: no path summary in lodprt view's output:\n{stdout[-2000:]}")
+    return {k: (v if k == "path" else float(v)) for k, v in m.groupdict().items()}
+
+
 def scene_file(folder: Path, floor: int) -> Path:
     path = folder / "scene.toml"
     mesh = model("stanford-bunny").as_posix()
@@ -78,12 +96,14 @@ def run(folder: Path, floor: int, frames: int, name: str) -> dict:
     summary = json.loads((folder / "frames.json").read_text())["summary"]
     xvfb = shutil.which("xvfb-run")
     shot = folder / "view.png"
-    view = lodprt + ["view", str(out), "--frames", "3", "--screenshot", str(shot)]
-    if xvfb:
-        steps["view"] = measured([xvfb, "-a", "-s", "-screen 0 1024x768x24"] + view, folder)
-    else:  # no X server: the same viewer loop on an EGL context
-        steps["view"] = measured(view + ["--headless"], folder)
-    if shot.is_file():  # the viewer's third frame, kept beside the results
+    view = lodprt + ["view", str(out), "--path", "orbit", "--frames", str(frames), "--screenshot", str(shot)]
+    with open(folder / "view.txt", "w") as fh:
+        if xvfb:
+            steps["view"] = measured([xvfb, "-a", "-s", "-screen 0 1024x768x24"] + view, folder, fh)
+        else:  # no X server: the same viewer loop on an EGL context
+            steps["view"] = measured(view + ["--headless"], folder, fh)
+    steps["view"]["path"] = view_path((folder / "view.txt").read_text())
+    if shot.is_file():  # the viewer's last frame, kept beside the results
         shutil.copyfile(shot, plot_path(f"{name}-view"))
     steps["view"]["screenshot"] = shot.is_file()
     for s in steps.values():
@@ -147,6 +167,11 @@ def main() -> None:
           f"{fs['lights_seconds']:.1f} s (longest frame's {fs['max_ms_lights'] / 1e3:.1f} s), "
           f"{fs['samples_completed_at_open']} at open; {fs['sample_cache_slots']} cache slots for "
           f"{fs['light_samples']} samples")
+    vp = res["steps"]["view"]["path"]
+    print(f"view: {vp['frames']:.0f} frames of the orbit, median update {vp['median_ms_update']:.0f} ms and draw "
+          f"{vp['median_ms_draw']:.0f} ms ({vp['first_frame_ms'] / 1e3:.1f} s the first); its light completed "
+          f"{vp['samples_completed']:.0f} samples in {vp['lights_seconds']:.1f} s (longest frame's "
+          f"{vp['max_seconds_lights']:.1f} s)")
     plot(res, plot_path(name))
     print(f"wrote {write(name, res, args.json)}")
 

@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -148,8 +149,8 @@ def fake_viewer(s):
     window = SimpleNamespace(keys=_Names(), mouse=_Names(), size=(s.camera.width // 2, s.camera.height // 2),
                              buffer_size=(s.camera.width, s.camera.height), modifiers=SimpleNamespace(shift=False),
                              mouse_states=SimpleNamespace(left=True))
-    v = SimpleNamespace(state=s, window=window, source=None)
-    for name in ("_key", "_press", "_drag", "_pixels"):
+    v = SimpleNamespace(state=s, window=window, source=None, player=None)
+    for name in ("_key", "_press", "_drag", "_pixels", "_pause"):
         setattr(v, name, getattr(Viewer, name).__get__(v))
     return v
 
@@ -447,3 +448,101 @@ def test_headless_viewer_shows_a_bar_while_a_moved_light_completes_samples(cut_s
     finally:
         v.renderer.release()
         v.window.destroy()
+
+
+def test_headless_viewer_plays_the_path_of_frames_and_pauses(cut_store, monkeypatch):
+    """``path="orbit"``: each frame takes the next camera and light of ``camera_path`` (looped), and makes the same
+    frames as a second Runtime stepped along that path as ``lodprt frames`` steps it; what each frame cost is kept
+    (the light samples completed counted by the cache); P and a drag pause it, P plays on from where it stopped."""
+    from lodprt.runtime.camera import camera_path
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    v = headless(cut_store, path="orbit", path_frames=4)
+    try:
+        v.window.use()
+        cam = v.state.camera
+        steps = list(camera_path(v.source, "orbit", 4, size=(cam.width, cam.height), fov=cam.fov))
+        twin = Runtime(open_store(cut_store))  # the path as `lodprt frames` steps it
+        done = v.samples.completed
+        for k in range(6):
+            v.step()
+            eye, lights = steps[k % 4][0].eye, steps[k % 4][1]
+            assert np.allclose(v.state.camera.eye, eye) and np.array_equal(v.frame.lights, lights)
+            twin.set_camera(steps[k % 4][0])
+            twin.set_lights(lights)
+            ref = twin.update()
+            assert np.array_equal(v.frame.triangles, ref.triangles)
+            assert v.overlay_text(len(v.frame.triangles)).splitlines()[-2] == f"path orbit, frame {k % 4 + 1} of 4 (P pauses)"
+        played = v.player.played
+        assert len(played) == 6 and sum(r["samples_completed"] for r in played) == v.samples.completed - done
+        assert all(r["ms_update"] > 0 and r["ms_lights"] >= 0 for r in played)
+        keys = v.window.keys = _Names()  # the headless window has no key codes: each key stands in as its name
+        v._key(keys.P, keys.ACTION_PRESS, None)
+        eye = v.state.camera.eye
+        v.step()
+        assert v.state.camera.eye == eye and len(v.player.played) == 6  # paused: nothing moves, nothing recorded
+        assert v.overlay_text(1).splitlines()[-2].endswith("(paused: P plays)")
+        v._key(keys.P, keys.ACTION_PRESS, None)
+        v.step()
+        assert np.allclose(v.state.camera.eye, steps[6 % 4][0].eye) and len(v.player.played) == 7
+        v.state.orbit(0.3, 0.0)  # what a drag does; the window's handler pauses the path first
+        v._pause()
+        v.state.dirty = True
+        moved = v.state.camera.eye
+        v.step()
+        assert np.allclose(v.frame.camera.eye, moved) and len(v.player.played) == 7
+    finally:
+        v.renderer.release()
+        v.window.destroy()
+
+
+def test_path_summary_is_the_records_median_and_sums():
+    """The closing summary of a played path: medians after the first frame, sums and the longest wait, exactly."""
+    from lodprt.display.playback import PathPlayer, summary_line
+
+    player = PathPlayer.__new__(PathPlayer)  # the records alone: no run time needed
+    player.path, player.played = "dolly", []
+    assert summary_line(player.summary()) == "path dolly: no frame played"
+    for rec in [(900.0, 1500.0, 20.0, 3), (0.0, 10.0, 4.0, 0), (2500.0, 30.0, 8.0, 2), (0.0, 20.0, 6.0, 0)]:
+        player.record(*rec)
+    s = player.summary()
+    assert s == {"path": "dolly", "frames": 4, "first_frame_ms": 1500.0, "median_ms_update": 20.0,
+                 "median_ms_draw": 6.0, "samples_completed": 5, "lights_seconds": 3.4, "max_ms_lights": 2500.0}
+    line = summary_line(s)
+    assert line == ("path dolly: 4 frames, median update 20 ms and draw 6 ms after the first (1500 ms); "
+                    "setting the lights completed 5 light samples in 3.4 s (longest frame's 2.5 s)")
+    # benchmarks/ten_million.py reads the numbers back from the line `lodprt view` prints
+    bench = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if bench not in sys.path:
+        sys.path.insert(0, bench)
+    from ten_million import view_path
+
+    assert view_path(f"lodprt view: closed after 4 frames\nlodprt view: {line}\n") == {
+        "path": "dolly", "frames": 4.0, "median_ms_update": 20.0, "median_ms_draw": 6.0, "first_frame_ms": 1500.0,
+        "samples_completed": 5.0, "lights_seconds": 3.4, "max_seconds_lights": 2.5}
+    with pytest.raises(SystemExit, match="no path summary"):
+        view_path("lodprt view: closed after 4 frames\n")
+
+
+def test_view_command_plays_a_path_and_prints_its_summary(cut_store, monkeypatch, capsys):
+    """``lodprt view --path orbit --frames N --headless``: N frames of the path, its summary line on closing; with
+    ``--light`` the light stays where it was put while the camera moves."""
+    from lodprt.cli.main import main
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", str(cut_store), "--headless", "--frames", "3", "--size", "160", "120", "--path", "orbit"]) == 0
+    out = capsys.readouterr().out
+    assert "closed after 3 frames" in out
+    assert re.search(r"path orbit: 3 frames, median update \d+ ms and draw \d+ ms after the first \(\d+ ms\); "
+                     r"setting the lights completed \d+ light samples in [0-9.]+ s", out)
+    assert main(["view", str(cut_store), "--headless", "--frames", "2", "--size", "160", "120", "--path", "dolly",
+                 "--light", "0.05", "0.3", "0.1"]) == 0
+    out = capsys.readouterr().out
+    assert "path dolly: 2 frames" in out and "light 1 of 1" not in out
+    with pytest.raises(SystemExit) as exc:
+        main(["view", str(cut_store), "--path", "spiral", "--headless", "--frames", "1"])
+    assert exc.value.code == 2
+    assert "invalid choice: 'spiral'" in capsys.readouterr().err

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from lodprt.cli import args as cli_args
 from lodprt.cli import environment as environment_cli
+from lodprt.display.playback import LAP, PATHS
 from lodprt.errors import LodprtError
 
 
@@ -113,7 +114,13 @@ def _add_view(sub) -> None:
     )
     _add_view_args(vw, None, required=False)
     cli_args.add_frame_ms(vw)
-    vw.add_argument("--frames", type=int, default=None, metavar="N", help="close after N frames (smoke tests)")
+    vw.add_argument("--path", choices=PATHS, default=None,
+                    help="play the camera path of 'lodprt frames' (the light circling with it unless --light is "
+                         "given), looped; P pauses and plays it, a drag pauses it; on closing, print what its "
+                         "frames cost (update, draw, light samples completed)")
+    vw.add_argument("--frames", type=int, default=None, metavar="N",
+                    help=f"close after N frames (smoke tests); with --path, a lap of the path is N frames "
+                         f"(default {LAP})")
     vw.add_argument("--headless", action="store_true",
                     help="no window: draw --frames N frames with the overlay on an EGL context (no DISPLAY needed)")
     vw.add_argument("--screenshot", default=None, metavar="PNG", help="save the last frame drawn as a PNG")
@@ -243,4 +250,5 @@ def cmd_view(args) -> int:
     lights, colors, camera = _view_setup(args, store)
     return run_viewer(store, lights=lights, colors=colors, camera=camera, lod=not args.full, frames=args.frames,
                       screenshot=args.screenshot, frame_ms=args.frame_ms, headless=args.headless,
-                      set_lights=set_lights_with_progress, **_view_cut(args), **_draw_options(args))
+                      set_lights=set_lights_with_progress, path=args.path, path_frames=args.frames,
+                      fixed_lights=bool(args.light), **_view_cut(args), **_draw_options(args))

@@ -11,6 +11,7 @@ Controls (also printed by H):
     left press / drag on a slider (bottom left): set the error bound or alpha (0 to 1) from the x position
     W wireframe        L LOD on/off                             V per-vertex / per-fragment radiance
     M light markers    - / =  exposure - / + 1/2 stop            H help     Q / Escape quit
+    P                  pause / play the camera path (``--path``; a drag or the wheel pauses it too)
 
 The overlay (top left) shows triangles, vertices, the active criterion with its knobs (the error bound; alpha only
 for "thesis", the only criterion that reads it; under a target PSNR the frame's estimated PSNR, E-3), under a
@@ -18,6 +19,9 @@ frame-time budget the budget and the bound's floor (B-2), lights and the frame t
 sliders (bottom left) show the same knobs and follow the keys. While a moved light completes light samples
 (seconds each on millions of vertices), the last frame stays up with a line saying how many are done. Without a
 display it raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
+
+``path="orbit"|"dolly"`` (``lodprt view --path``) plays the camera path of ``lodprt frames``, the light circling with
+it (``lodprt.display.playback``), and ``lodprt view`` prints what its frames cost when it closes.
 
 ``headless=True`` (``lodprt view --headless --frames N``) runs the same loop, overlay and screenshot on an EGL
 context (moderngl-window's headless window: no events, no DISPLAY needed), for servers and the tests.
@@ -35,6 +39,7 @@ import time
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.display.playback import LAP, PathPlayer, summary_line
 from lodprt.display.render import Renderer
 from lodprt.runtime.camera import rotate_about
 from lodprt.runtime.frames import auto_white
@@ -347,7 +352,8 @@ class Viewer:
                  outside: str = "clamp",
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True, headless: bool = False,
-                 set_lights=None):
+                 set_lights=None, path: str | None = None, path_frames: int | None = None,
+                 fixed_lights: bool = False):
         #: ``set_lights(source, lights, colors)``: how a frame sets the lights (the CLI's shows a progress bar on
         #: stderr while they complete light samples, seconds each on a store of millions of vertices)
         self.set_lights = set_lights or (lambda source, lights, colors: source.set_lights(lights, colors))
@@ -381,12 +387,16 @@ class Viewer:
             raise LodprtError(f"cannot open {where}: {exc}") from exc
         self.source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation,
                                    frame_ms=frame_ms)  # after the window: fail fast
+        self.samples = getattr(self.source, "samples", None)  # the run time's sample cache (None: full resolution)
+        #: ``--path``: the camera path played (``lodprt.display.playback``)
+        self.player = None if path is None else PathPlayer(self.source, path, path_frames or LAP, camera=camera,
+                                                           fixed_lights=fixed_lights)
         w = self.window
         self.renderer = Renderer(w.ctx)
         self.overlay = _Overlay(w.ctx)
         self.frame = None
         self.pushed = None  # the (error_bound, alpha) last given to the source
-        self.ms_update = self.ms_draw = 0.0
+        self.ms_update = self.ms_draw = self.ms_lights = 0.0
         w.mouse_drag_event_func = self._drag
         w.mouse_press_event_func = self._press
         w.mouse_release_event_func = lambda x, y, button: self.state.release()
@@ -407,9 +417,11 @@ class Viewer:
 
     def _drag(self, x, y, dx, dy):
         w = self.window
+        self._pause()
         self.state.drag(*self._pixels(x, y, dx, dy), left=w.mouse_states.left, shift=w.modifiers.shift)
 
     def _scroll(self, x_offset, y_offset):
+        self._pause()
         if self.window.modifiers.shift:
             self.state.move_light(0.0, 0.0, 0.05 * y_offset)
         else:
@@ -424,8 +436,10 @@ class Viewer:
         elif key == keys.TAB:
             s.selected = (s.selected + 1) % len(s.lights)
         elif key == keys.A:
+            self._pause()
             s.add_light()
         elif key in (keys.DELETE, keys.BACKSPACE):
+            self._pause()
             s.remove_light()
         elif key in (keys.LEFT_BRACKET, keys.RIGHT_BRACKET):
             s.step_error_bound(key == keys.RIGHT_BRACKET)
@@ -444,23 +458,34 @@ class Viewer:
         elif key in (keys.MINUS, keys.EQUAL):
             s.exposure += 0.5 if key == keys.EQUAL else -0.5
         elif key == keys.R:
+            self._pause()
             s.camera = dataclasses.replace(self.home, width=s.camera.width, height=s.camera.height)
             s.dirty = True
+        elif key == keys.P and self.player is not None:
+            self.player.toggle()
         elif key == keys.H:
             print(HELP)
+
+    def _pause(self) -> None:
+        """The user takes the camera or a light: a playing path stops where it is."""
+        if self.player is not None:
+            self.player.paused = True
 
     # -- loop ------------------------------------------------------------------------------------------------
     def step(self) -> None:
         """One frame: a new run-time frame if the state changed, then draw it and the overlay."""
         s = self.state
+        playing = self.player is not None and self.player.advance(s)
         if s.dirty or self.frame is None:
             t0 = time.perf_counter()
+            done = 0 if self.samples is None else self.samples.completed
             if (s.error_bound, s.alpha) != self.pushed:  # the user moved a knob (not every frame: a target's
                 self.source.set_error_bound(s.error_bound, s.alpha)  # steering keeps the bound it found, E-4)
                 self.pushed = (s.error_bound, s.alpha)
             s.dirty = False  # a control moved while the window waits for light samples asks for the next frame
             with self._completing():
                 self.set_lights(self.source, s.lights, s.colors)
+            self.ms_lights = 1e3 * (time.perf_counter() - t0)
             self.source.set_camera(s.camera)
             self.frame = self.source.update()
             if not s.dirty:  # what the run time made of the knobs and lights (nothing moved meanwhile)
@@ -469,6 +494,9 @@ class Viewer:
                 s.lights = np.asarray(self.frame.lights, np.float64).copy()  # as the run time clamped them
             self.ms_update = 1e3 * (time.perf_counter() - t0)
         self._draw()
+        if playing:
+            completed = 0 if self.samples is None else self.samples.completed - done
+            self.player.record(self.ms_lights, self.ms_update - self.ms_lights, self.ms_draw, completed)
 
     def _draw(self, notice: str | None = None) -> None:
         """The frame and the overlay (with a ``notice`` line); before the first frame, the notice alone."""
@@ -490,7 +518,7 @@ class Viewer:
     def _completing(self):
         """While the lights complete light samples (seconds each on a store of millions of vertices): the window
         shows the last frame with how many are done, redrawn as each one is (``SampleCache.reporting``)."""
-        cache = getattr(self.source, "samples", None)
+        cache = self.samples
         return contextlib.nullcontext() if cache is None else cache.reporting(self._show_completion)
 
     def _show_completion(self, done: int, total: int) -> None:
@@ -501,7 +529,8 @@ class Viewer:
 
     def overlay_text(self, triangles: int) -> str:
         """The overlay's lines for the frame drawn (``triangles`` of it): the mesh, the criterion's knobs with E-3's
-        estimate, the frame-time budget (B-2) with the bound's floor, the selected light, the times."""
+        estimate, the frame-time budget (B-2) with the bound's floor, the selected light, the path played, the
+        times."""
         s, st = self.state, self.frame.stats
         budget = st.get("frame_ms_budget")
         floor = st.get("bound_floor") or 0.0
@@ -512,6 +541,7 @@ class Viewer:
                 + ("" if budget is None else f"\nbudget {budget:.3g} ms, bound floor "
                    + (f"{floor:.3g}" if floor > 0 else "off")) + "\n"
                 f"light {s.selected + 1} of {len(s.lights)} at ({', '.join(f'{x:.3f}' for x in s.lights[s.selected])})\n"
+                + ("" if self.player is None else f"{self.player.status()}\n") +
                 f"update {self.ms_update:.0f} ms (cut {st.get('ms_cut', 0.0):.0f}), draw {self.ms_draw:.0f} ms  [H help]")
 
     def screenshot(self, path) -> None:
@@ -550,4 +580,6 @@ def run_viewer(store, *, frames: int | None = None, screenshot=None, **options) 
     est = None if viewer.frame is None else viewer.frame.stats.get("estimated_psnr_db")
     print(f"lodprt view: closed after {n} frames ({viewer.state.knobs()}"
           + ("" if est is None else f", estimated {est:.1f} dB") + ")")
+    if viewer.player is not None:
+        print(f"lodprt view: {summary_line(viewer.player.summary())}")
     return 0
