@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from lodprt.runtime.camera import Camera
-from lodprt.display.viewer import SLIDER_ROW, Slider, Viewer, ViewerState, slider_layout
+from lodprt.display.overlay import SLIDER_ROW, Slider, slider_layout
+from lodprt.display.viewer import Viewer, ViewerState
 
 
 def state():
@@ -546,3 +547,63 @@ def test_view_command_plays_a_path_and_prints_its_summary(cut_store, monkeypatch
         main(["view", str(cut_store), "--path", "spiral", "--headless", "--frames", "1"])
     assert exc.value.code == 2
     assert "invalid choice: 'spiral'" in capsys.readouterr().err
+
+
+def test_the_window_says_the_store_is_opening_and_counts_the_samples_it_completes(cut_store, monkeypatch):
+    """While the run time opens (a minute at 10M vertices) the window shows a notice naming the store and its
+    vertices, then how many of the light samples the opening completes are done, each reported to ``progress``
+    as well (the CLI's bar); once open, later completions report through the frame that needs them only."""
+    from lodprt.display.overlay import Overlay
+    from lodprt.store.bake_store import open_store
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    shown, told = [], []
+    draw = Overlay.draw
+
+    def record(self, text, size, sliders=(), values=None):
+        shown.append(text)
+        draw(self, text, size, sliders, values)
+
+    monkeypatch.setattr(Overlay, "draw", record)
+    v = headless(cut_store, progress=lambda done, total: told.append((done, total)))
+    try:
+        V = open_store(cut_store).num_vertices
+        opening = f"opening cut.zarr: {V:,} vertices"
+        n = v.samples.completed
+        assert n >= 1 and told == [(i, n) for i in range(n + 1)]
+        assert shown == [opening] + [f"{opening}\ncompleting light samples: {i} of {n} done" for i in range(n + 1)]
+        assert v.samples.progress is None
+        v.window.use()
+        v.step()  # the first frame: the overlay, no notice
+        assert not shown[-1].startswith("opening") and "completing" not in shown[-1]
+    finally:
+        v.renderer.release()
+        v.window.destroy()
+
+
+def test_transient_bar_closes_once_its_total_is_reached(monkeypatch):
+    """``cli.progress.transient_bar``: made at the first report, advanced to each ``done``, closed at the total."""
+    from lodprt.cli import progress as cli_progress
+
+    made = []
+
+    class Bar:
+        def __init__(self, **options):
+            self.n, self.options, self.closed = 0, options, False
+            made.append(self)
+
+        def update(self, k):
+            self.n += k
+
+        def close(self):
+            self.closed = True
+
+    monkeypatch.setattr(cli_progress, "new_bar", lambda **options: Bar(**options))
+    update = cli_progress.transient_bar("opening: completing light samples", "sample")
+    assert made == []
+    update(0, 3)
+    update(2, 3)
+    assert len(made) == 1 and made[0].n == 2 and not made[0].closed
+    assert made[0].options == {"total": 3, "unit": "sample", "desc": "opening: completing light samples", "leave": False}
+    update(3, 3)
+    assert made[0].n == 3 and made[0].closed

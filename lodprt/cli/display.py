@@ -235,7 +235,7 @@ def cmd_turntable(args) -> int:
 
 
 def cmd_view(args) -> int:
-    from lodprt.cli.progress import set_lights_with_progress
+    from lodprt.cli.progress import set_lights_with_progress, transient_bar
     from lodprt.display.viewer import run_viewer
     from lodprt.store.bake_store import open_store
 
@@ -251,4 +251,6 @@ def cmd_view(args) -> int:
     return run_viewer(store, lights=lights, colors=colors, camera=camera, lod=not args.full, frames=args.frames,
                       screenshot=args.screenshot, frame_ms=args.frame_ms, headless=args.headless,
                       set_lights=set_lights_with_progress, path=args.path, path_frames=args.frames,
-                      fixed_lights=bool(args.light), **_view_cut(args), **_draw_options(args))
+                      fixed_lights=bool(args.light), progress=transient_bar("opening: completing light samples",
+                                                                            "sample"),
+                      **_view_cut(args), **_draw_options(args))

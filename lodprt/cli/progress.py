@@ -68,6 +68,20 @@ def with_progress(total: int, desc: str, unit: str, work):
         bar.close()
 
 
+def transient_bar(desc: str, unit: str):
+    """A ``progress(done, total)`` callback drawing a transient bar on stderr, made at its first report and closed
+    once ``done`` reaches ``total`` (for work reported from inside a constructor, the viewer's opening)."""
+    bars = ProgressBars(leave=False)
+    advance = bars.callback(desc, unit)
+
+    def update(done, total):
+        advance(done, total)
+        if done >= total:
+            bars.__exit__(None, None, None)
+
+    return update
+
+
 def set_lights_with_progress(source, lights, colors=None, *, desc: str = "completing light samples") -> None:
     """``source.set_lights(lights, colors)`` with a transient bar on stderr while it completes light samples
     (seconds each at millions of vertices, docs/SCALE.md), shown as the first one starts (the source's sample

@@ -17,7 +17,8 @@ The overlay (top left) shows triangles, vertices, the active criterion with its 
 for "thesis", the only criterion that reads it; under a target PSNR the frame's estimated PSNR, E-3), under a
 frame-time budget the budget and the bound's floor (B-2), lights and the frame time (run-time update and draw); the
 sliders (bottom left) show the same knobs and follow the keys. While a moved light completes light samples
-(seconds each on millions of vertices), the last frame stays up with a line saying how many are done. Without a
+(seconds each on millions of vertices), the last frame stays up with a line saying how many are done; while the
+store opens (a minute at 10M vertices), the window says so, and how many light samples the opening completed. Without a
 display it raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
 
 ``path="orbit"|"dolly"`` (``lodprt view --path``) plays the camera path of ``lodprt frames``, the light circling with
@@ -39,6 +40,7 @@ import time
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.display.overlay import Overlay, Slider, slider_layout
 from lodprt.display.playback import LAP, PathPlayer, summary_line
 from lodprt.display.render import Renderer
 from lodprt.runtime.camera import rotate_about
@@ -52,89 +54,6 @@ log = logging.getLogger(__name__)
 
 HELP = __doc__.split("Controls (also printed by H):")[1].split("The overlay")[0].rstrip()
 
-_OVERLAY_VERTEX = """
-#version 330
-in vec2 in_pos;
-in vec2 in_uv;
-out vec2 v_uv;
-void main() { gl_Position = vec4(in_pos, 0.0, 1.0); v_uv = in_uv; }
-"""
-_OVERLAY_FRAGMENT = """
-#version 330
-uniform sampler2D text;
-in vec2 v_uv;
-out vec4 f_col;
-void main() { f_col = texture(text, v_uv); }
-"""
-
-
-@dataclasses.dataclass(frozen=True)
-class Slider:
-    """A horizontal slider in framebuffer pixels (origin top left, y down): ``rect`` = (x, y, width, height) of its
-    track, the part a press must start in; ``value_at`` maps an x position linearly onto [lo, hi], clamped at the
-    ends."""
-
-    name: str  # the ViewerState field it sets
-    label: str
-    rect: tuple[float, float, float, float]
-    lo: float = 0.0
-    hi: float = 1.0
-
-    def contains(self, x: float, y: float) -> bool:
-        x0, y0, w, h = self.rect
-        return x0 <= x <= x0 + w and y0 <= y <= y0 + h
-
-    def value_at(self, x: float) -> float:
-        x0, _, w, _ = self.rect
-        t = min(max((x - x0) / w, 0.0), 1.0)
-        return self.lo + t * (self.hi - self.lo)
-
-    def fraction(self, value: float) -> float:
-        """How much of the track is filled for ``value`` (0 to 1; values outside the range fill none or all)."""
-        return min(max((value - self.lo) / (self.hi - self.lo), 0.0), 1.0)
-
-
-SLIDER_MARGIN, SLIDER_ROW, SLIDER_LABEL, SLIDER_VALUE = 6, 16, 72, 44  # pixels: edge gap, row height, text widths
-
-
-def slider_layout(width: int, height: int, *, alpha: bool = True, knobs=None) -> tuple[Slider, ...]:
-    """A criterion's sliders in the bottom-left corner of a ``width`` x ``height`` pixel window: one per knob with
-    a range (``knobs``: ``Criterion.KNOBS``; default the error bound and, with ``alpha``, the thesis criterion's
-    alpha), each a label column, the track, then the value; the track is 160 pixels wide, less in a narrow window
-    (at least 40)."""
-    track = max(40, min(160, width - 2 * SLIDER_MARGIN - SLIDER_LABEL - SLIDER_VALUE - 8))
-    x0 = SLIDER_MARGIN + 4 + SLIDER_LABEL
-    if knobs is None:
-        knobs = CRITERIA["thesis" if alpha else "screen"].KNOBS
-    rows = [(k.name, k.name.replace("_", " "), k.range) for k in knobs if k.range is not None]
-    top = height - SLIDER_MARGIN - 4 - SLIDER_ROW * len(rows)
-    return tuple(Slider(name, label, (x0, top + i * SLIDER_ROW + 2, track, SLIDER_ROW - 4), *span)
-                 for i, (name, label, span) in enumerate(rows))
-
-
-def _slider_panel(sliders, values) -> tuple[object, tuple[int, int]]:
-    """The sliders drawn with Pillow: an RGBA image of the panel behind them and its top-left corner (pixels)."""
-    from PIL import Image, ImageDraw
-
-    x_end = max(s.rect[0] + s.rect[2] for s in sliders) + 4 + SLIDER_VALUE
-    y0 = min(s.rect[1] for s in sliders) - 4
-    y_end = max(s.rect[1] + s.rect[3] for s in sliders) + 4
-    left, top = SLIDER_MARGIN, int(y0)
-    img = Image.new("RGBA", (int(x_end) - left, int(y_end) - top), (0, 0, 0, 150))
-    draw = ImageDraw.Draw(img)
-    for s in sliders:
-        x, y, w, h = (int(round(v)) for v in s.rect)
-        x, y = x - left, y - top
-        value = values[s.name]
-        draw.text((4, y + h / 2 - 6), s.label, fill=(255, 255, 255, 255))
-        draw.rectangle((x, y + 2, x + w - 1, y + h - 3), fill=(70, 70, 70, 255), outline=(150, 150, 150, 255))
-        fill = int(round(s.fraction(value) * (w - 2)))
-        if fill > 0:
-            draw.rectangle((x + 1, y + 3, x + fill, y + h - 4), fill=(255, 200, 60, 255))
-        draw.text((x + w + 4, y + h / 2 - 6), f"{value:.3g}", fill=(255, 255, 255, 255))
-    return img, (left, top)
-
-
 def _check_display(headless: bool) -> None:
     if not headless and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise LodprtError("no display: DISPLAY is not set (run it on a desktop, over ssh -X, or under a virtual "
@@ -144,59 +63,6 @@ def _check_display(headless: bool) -> None:
                if importlib.util.find_spec(name) is None]
     if missing:
         raise LodprtError(f"the viewer needs {' and '.join(missing)}: pip install moderngl-window")
-
-
-class _Overlay:
-    """Text in the top-left corner and the sliders in the bottom-left one: drawn with Pillow into textures (redrawn
-    only when they change), blended over the frame."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.prog = ctx.program(vertex_shader=_OVERLAY_VERTEX, fragment_shader=_OVERLAY_FRAGMENT)
-        self.vbo = ctx.buffer(reserve=4 * 4 * 4)
-        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f 2f", "in_pos", "in_uv")])
-        self.tex = {}  # what -> (key it was drawn from, top-left pixel, texture)
-
-    def draw(self, text: str, size: tuple[int, int], sliders=(), values=None) -> None:
-        from PIL import Image, ImageDraw
-
-        def text_image():
-            lines = text.split("\n")
-            img = Image.new("RGBA", (8 + 7 * max(len(s) for s in lines), 6 + 13 * len(lines)), (0, 0, 0, 150))
-            ImageDraw.Draw(img).multiline_text((4, 3), text, fill=(255, 255, 255, 255), spacing=2)
-            return img, (0, 0)
-
-        self._blit("text", text, text_image, size)
-        if sliders:
-            key = (tuple(sliders), tuple(values[s.name] for s in sliders))
-            self._blit("sliders", key, lambda: _slider_panel(sliders, values), size)
-
-    def _blit(self, what, key, make, size) -> None:
-        """Draw the image ``make()`` returns at its top-left pixel position; made again only when ``key`` changed."""
-        import moderngl
-        from PIL import Image
-
-        old = self.tex.get(what)
-        if old is None or old[0] != key:
-            img, pos = make()
-            if old is not None:
-                old[2].release()
-            tex = self.ctx.texture(img.size, 4, img.transpose(Image.FLIP_TOP_BOTTOM).tobytes())
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)  # one texel per pixel: crisp text
-            self.tex[what] = old = (key, pos, tex)
-        _, (px, py), tex = old
-        w, h = tex.size
-        x0, x1 = -1 + 2 * px / size[0], -1 + 2 * (px + w) / size[0]
-        y1, y0 = 1 - 2 * py / size[1], 1 - 2 * (py + h) / size[1]
-        self.vbo.write(np.array([x0, y0, 0, 0, x1, y0, 1, 0, x0, y1, 0, 1, x1, y1, 1, 1], np.float32).tobytes())
-        self.ctx.disable(moderngl.DEPTH_TEST)
-        self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        tex.use(0)
-        self.prog["text"].value = 0
-        self.vao.render(moderngl.TRIANGLE_STRIP)
-        self.ctx.disable(moderngl.BLEND)
-        self.ctx.enable(moderngl.DEPTH_TEST)
 
 
 @dataclasses.dataclass
@@ -353,9 +219,10 @@ class Viewer:
                  lod: bool = True, wireframe: bool = False, per_vertex: bool = False, exposure: float = 0.0,
                  white: float | None = None, light_markers: bool = True, headless: bool = False,
                  set_lights=None, path: str | None = None, path_frames: int | None = None,
-                 fixed_lights: bool = False):
+                 fixed_lights: bool = False, progress=None):
         #: ``set_lights(source, lights, colors)``: how a frame sets the lights (the CLI's shows a progress bar on
-        #: stderr while they complete light samples, seconds each on a store of millions of vertices)
+        #: stderr while they complete light samples, seconds each on a store of millions of vertices);
+        #: ``progress(done, total)``: told of the light samples the store's opening completes (the CLI's bar)
         self.set_lights = set_lights or (lambda source, lights, colors: source.set_lights(lights, colors))
         if outside == "error":  # the starting lights; a light dragged out of the box later is clamped
             from lodprt.runtime.lights import LightInterpolator
@@ -385,16 +252,27 @@ class Viewer:
         except Exception as exc:  # no X server behind DISPLAY, no GLX or EGL, no OpenGL 3.3
             where = "a headless EGL context" if headless else f"a window on DISPLAY={os.environ.get('DISPLAY')!r}"
             raise LodprtError(f"cannot open {where}: {exc}") from exc
+        w = self.window
+        self.renderer = Renderer(w.ctx)
+        self.overlay = Overlay(w.ctx)
+        self.frame = None
+        # the run time opens after the window (fail fast), a minute at 10M vertices: the window says so meanwhile
+        opening = f"opening {store.path.name}: {store.num_vertices:,} vertices"
+        self._show(opening)
+
+        def opened(done: int, total: int) -> None:
+            self._show(f"{opening}\ncompleting light samples: {done} of {total} done")
+            if progress is not None:
+                progress(done, total)
+
         self.source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation,
-                                   frame_ms=frame_ms)  # after the window: fail fast
+                                   frame_ms=frame_ms, progress=opened)
         self.samples = getattr(self.source, "samples", None)  # the run time's sample cache (None: full resolution)
+        if self.samples is not None:  # later completions report through the frame that needs them (_completing)
+            self.samples.progress = None
         #: ``--path``: the camera path played (``lodprt.display.playback``)
         self.player = None if path is None else PathPlayer(self.source, path, path_frames or LAP, camera=camera,
                                                            fixed_lights=fixed_lights)
-        w = self.window
-        self.renderer = Renderer(w.ctx)
-        self.overlay = _Overlay(w.ctx)
-        self.frame = None
         self.pushed = None  # the (error_bound, alpha) last given to the source
         self.ms_update = self.ms_draw = self.ms_lights = 0.0
         w.mouse_drag_event_func = self._drag
@@ -522,10 +400,14 @@ class Viewer:
         return contextlib.nullcontext() if cache is None else cache.reporting(self._show_completion)
 
     def _show_completion(self, done: int, total: int) -> None:
+        self._show(f"completing light samples: {done} of {total} done")
+
+    def _show(self, notice: str) -> None:
+        """The last frame (if any) with ``notice`` under its overlay, shown now (the window takes its events)."""
         w = self.window
         w.use()
-        self._draw(f"completing light samples: {done} of {total} done")
-        w.swap_buffers()  # shows it (and takes the window's events meanwhile)
+        self._draw(notice)
+        w.swap_buffers()
 
     def overlay_text(self, triangles: int) -> str:
         """The overlay's lines for the frame drawn (``triangles`` of it): the mesh, the criterion's knobs with E-3's
