@@ -607,3 +607,19 @@ def test_transient_bar_closes_once_its_total_is_reached(monkeypatch):
     assert made[0].options == {"total": 3, "unit": "sample", "desc": "opening: completing light samples", "leave": False}
     update(3, 3)
     assert made[0].n == 3 and made[0].closed
+
+
+def test_a_source_without_a_sample_cache_sets_its_lights_with_no_bar(capsys):
+    """``runtime.sources.reporting`` and the CLI's ``set_lights_with_progress`` on a source with no sample cache
+    (full-resolution ``StoreFrames``): the lights are set once, nothing is reported, no bar is drawn."""
+    from lodprt.cli.progress import set_lights_with_progress
+    from lodprt.runtime.sources import reporting, sample_cache
+
+    calls, told = [], []
+    source = SimpleNamespace(set_lights=lambda lights, colors: calls.append((lights, colors)))
+    assert sample_cache(source) is None
+    with reporting(source, lambda done, total: told.append((done, total))):
+        source.set_lights([[0.0, 1.0, 0.0]], None)
+    set_lights_with_progress(source, [[0.0, 2.0, 0.0]])
+    assert calls == [([[0.0, 1.0, 0.0]], None), ([[0.0, 2.0, 0.0]], None)] and told == []
+    assert capsys.readouterr().err == ""

@@ -86,9 +86,7 @@ def set_lights_with_progress(source, lights, colors=None, *, desc: str = "comple
     """``source.set_lights(lights, colors)`` with a transient bar on stderr while it completes light samples
     (seconds each at millions of vertices, docs/SCALE.md), shown as the first one starts (the source's sample
     cache reports each, ``SampleCache.reporting``; a source without one sets its lights as it is)."""
-    cache = getattr(source, "samples", None)
-    if cache is None:
-        source.set_lights(lights, colors)
-        return
-    with ProgressBars(leave=False) as bars, cache.reporting(bars.callback(desc, "sample")):
+    from lodprt.runtime.sources import reporting
+
+    with ProgressBars(leave=False) as bars, reporting(source, bars.callback(desc, "sample")):
         source.set_lights(lights, colors)

@@ -18,8 +18,8 @@ for "thesis", the only criterion that reads it; under a target PSNR the frame's 
 frame-time budget the budget and the bound's floor (B-2), lights and the frame time (run-time update and draw); the
 sliders (bottom left) show the same knobs and follow the keys. While a moved light completes light samples
 (seconds each on millions of vertices), the last frame stays up with a line saying how many are done; while the
-store opens (a minute at 10M vertices), the window says so, and how many light samples the opening completed. Without a
-display it raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
+store opens (a minute at 10M vertices), the window says so, and how many light samples the opening completed.
+Without a display it raises LodprtError saying what is missing (no DISPLAY, or no moderngl-window).
 
 ``path="orbit"|"dolly"`` (``lodprt view --path``) plays the camera path of ``lodprt frames``, the light circling with
 it (``lodprt.display.playback``), and ``lodprt view`` prints what its frames cost when it closes.
@@ -30,7 +30,6 @@ context (moderngl-window's headless window: no events, no DISPLAY needed), for s
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import importlib.util
 import logging
@@ -48,7 +47,7 @@ from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.criteria import CRITERIA, make_criterion, resolve_criterion
 from lodprt.runtime.settings import check_frame_ms
-from lodprt.runtime.sources import frame_source
+from lodprt.runtime.sources import frame_source, reporting, sample_cache
 
 log = logging.getLogger(__name__)
 
@@ -267,7 +266,7 @@ class Viewer:
 
         self.source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation,
                                    frame_ms=frame_ms, progress=opened)
-        self.samples = getattr(self.source, "samples", None)  # the run time's sample cache (None: full resolution)
+        self.samples = sample_cache(self.source)  # the run time's (None: full resolution)
         if self.samples is not None:  # later completions report through the frame that needs them (_completing)
             self.samples.progress = None
         #: ``--path``: the camera path played (``lodprt.display.playback``)
@@ -396,8 +395,7 @@ class Viewer:
     def _completing(self):
         """While the lights complete light samples (seconds each on a store of millions of vertices): the window
         shows the last frame with how many are done, redrawn as each one is (``SampleCache.reporting``)."""
-        cache = self.samples
-        return contextlib.nullcontext() if cache is None else cache.reporting(self._show_completion)
+        return reporting(self.source, self._show_completion)
 
     def _show_completion(self, done: int, total: int) -> None:
         self._show(f"completing light samples: {done} of {total} done")

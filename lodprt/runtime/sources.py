@@ -3,6 +3,7 @@ for one without."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 
 from lodprt.runtime.criteria import resolve_criterion
@@ -30,3 +31,17 @@ def frame_source(store, *, criterion="screen", lod: bool = True, interpolation: 
     if lod:
         log.warning("%s: no hierarchy (or no run time): drawing full resolution", store.path)
     return StoreFrames(store, interpolation=interpolation, outside=outside)
+
+
+def sample_cache(source):
+    """The light-sample cache of a frame source (``lodprt.runtime.samples.SampleCache``); None for one that has
+    none (``StoreFrames``: full resolution, every sample read from the store)."""
+    return getattr(source, "samples", None)
+
+
+def reporting(source, callback):
+    """A context in which ``callback(done, total)`` is also told of the light samples ``source`` completes
+    (``SampleCache.reporting``: (0, n) before the first of n, (i, n) after the i-th); nothing for a source without
+    a cache."""
+    cache = sample_cache(source)
+    return contextlib.nullcontext() if cache is None else cache.reporting(callback)
