@@ -552,7 +552,8 @@ def test_view_command_plays_a_path_and_prints_its_summary(cut_store, monkeypatch
 def test_the_window_says_the_store_is_opening_and_counts_the_samples_it_completes(cut_store, monkeypatch):
     """While the run time opens (a minute at 10M vertices) the window shows a notice naming the store and its
     vertices, then how many of the light samples the opening completes are done, each reported to ``progress``
-    as well (the CLI's bar); once open, later completions report through the frame that needs them only."""
+    as well (the CLI's bar), then that the first frame is being made; once open, later completions report through
+    the frame that needs them only."""
     from lodprt.display.overlay import Overlay
     from lodprt.store.bake_store import open_store
 
@@ -574,8 +575,12 @@ def test_the_window_says_the_store_is_opening_and_counts_the_samples_it_complete
         assert shown == [opening] + [f"{opening}\ncompleting light samples: {i} of {n} done" for i in range(n + 1)]
         assert v.samples.progress is None
         v.window.use()
-        v.step()  # the first frame: the overlay, no notice
+        v.step()  # the first frame: a notice while it is made, then the overlay alone
+        assert shown[-2] == f"{opening}\nmaking the first frame"
         assert not shown[-1].startswith("opening") and "completing" not in shown[-1]
+        v.state.orbit(0.05, 0.0)
+        v.step()  # later frames say nothing of the kind
+        assert "making the first frame" not in shown[-2]
     finally:
         v.renderer.release()
         v.window.destroy()

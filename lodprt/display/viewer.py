@@ -256,7 +256,7 @@ class Viewer:
         self.overlay = Overlay(w.ctx)
         self.frame = None
         # the run time opens after the window (fail fast), a minute at 10M vertices: the window says so meanwhile
-        opening = f"opening {store.path.name}: {store.num_vertices:,} vertices"
+        self.opening = opening = f"opening {store.path.name}: {store.num_vertices:,} vertices"
         self._show(opening)
 
         def opened(done: int, total: int) -> None:
@@ -364,6 +364,8 @@ class Viewer:
                 self.set_lights(self.source, s.lights, s.colors)
             self.ms_lights = 1e3 * (time.perf_counter() - t0)
             self.source.set_camera(s.camera)
+            if self.frame is None:  # the first frame refines the cut to its target: seconds at 10M vertices
+                self._show(f"{self.opening}\nmaking the first frame")
             self.frame = self.source.update()
             if not s.dirty:  # what the run time made of the knobs and lights (nothing moved meanwhile)
                 s.error_bound = float(getattr(self.source, "error_bound", s.error_bound))  # the steered bound
