@@ -17,7 +17,8 @@ most 1 KB per vertex):
   it is installed, else ``--headless`` (the same loop, run-time frames and overlay on an EGL context, no window);
   the results say which (``view_mode``). The window plays the path ``frames`` times, its light moving the same
   way, completing the same samples with the window's notice up while it waits; the viewer's closing summary
-  (``view_path``: median update and draw, the samples completed and their seconds, the longest wait) is kept.
+  (``view_path``: median update and draw, the samples completed and their seconds, the longest wait) is kept,
+  with the seconds its run time took to open (``open_seconds``, as in ``frames``' summary).
 
 Writes benchmarks/results/ten_million[-quick].json, .png (bytes per vertex of each step against the 1 KB line) and
 -view.png (the viewer's screenshot).
@@ -64,12 +65,19 @@ PATH_LINE = re.compile(r"path (?P<path>\w+): (?P<frames>\d+) frames, median upda
                        r"(?P<lights_seconds>[0-9.]+) s \(longest frame's (?P<max_seconds_lights>[0-9.]+) s\)")
 
 
+#: the line ``lodprt view`` prints once the store is open
+OPEN_LINE = re.compile(r"lodprt view: .* opened in (?P<open_seconds>[0-9.]+) s - ")
+
+
 def view_path(stdout: str) -> dict:
-    """The numbers of the viewer's closing path summary in ``stdout`` (a failure names what was printed)."""
-    m = PATH_LINE.search(stdout)
-    if m is None:
-        raise SystemExit(f"ten_million: no path summary in lodprt view's output:\n{stdout[-2000:]}")
-    return {k: (v if k == "path" else float(v)) for k, v in m.groupdict().items()}
+    """The numbers of the viewer's closing path summary in ``stdout``, and the seconds its opening took (a
+    failure names what was printed)."""
+    m, opened = PATH_LINE.search(stdout), OPEN_LINE.search(stdout)
+    if m is None or opened is None:
+        raise SystemExit(f"ten_million: no {'path summary' if m is None else 'opening time'} in lodprt view's "
+                         f"output:\n{stdout[-2000:]}")
+    return {**{k: (v if k == "path" else float(v)) for k, v in m.groupdict().items()},
+            "open_seconds": float(opened["open_seconds"])}
 
 
 def scene_file(folder: Path, floor: int) -> Path:
@@ -113,7 +121,7 @@ def run(folder: Path, floor: int, frames: int, name: str) -> dict:
             "frames_summary": {k: summary[k] for k in ("median_ms", "p95_ms", "first_frame_ms", "median_triangles",
                                                       "full_triangles", "error_bound", "target_psnr", "samples_completed",
                                                       "samples_completed_at_open", "lights_seconds", "max_ms_lights",
-                                                      "sample_cache_slots", "light_samples")}}
+                                                      "sample_cache_slots", "light_samples", "open_seconds")}}
 
 
 def plot(res: dict, path: Path) -> None:
@@ -166,9 +174,10 @@ def main() -> None:
           f"setting the lights completed {fs['samples_completed']} light samples along the path in "
           f"{fs['lights_seconds']:.1f} s (longest frame's {fs['max_ms_lights'] / 1e3:.1f} s), "
           f"{fs['samples_completed_at_open']} at open; {fs['sample_cache_slots']} cache slots for "
-          f"{fs['light_samples']} samples")
+          f"{fs['light_samples']} samples; opening the store took {fs['open_seconds']:.1f} s")
     vp = res["steps"]["view"]["path"]
-    print(f"view: {vp['frames']:.0f} frames of the orbit, median update {vp['median_ms_update']:.0f} ms and draw "
+    print(f"view: opened in {vp['open_seconds']:.1f} s; "
+          f"{vp['frames']:.0f} frames of the orbit, median update {vp['median_ms_update']:.0f} ms and draw "
           f"{vp['median_ms_draw']:.0f} ms ({vp['first_frame_ms'] / 1e3:.1f} s the first); its light completed "
           f"{vp['samples_completed']:.0f} samples in {vp['lights_seconds']:.1f} s (longest frame's "
           f"{vp['max_seconds_lights']:.1f} s)")

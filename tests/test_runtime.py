@@ -1,5 +1,7 @@
 """Run time (SPEC 5): light interpolation on a bake, the view-dependent cut, incremental refinement, relighting."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -484,9 +486,13 @@ def test_cli_frames_json(bunny_bake, capsys):
 
     from lodprt.cli.main import main
 
+    t = time.perf_counter()
     assert main(["frames", str(bunny_bake), "--frames", "6", "--path", "dolly", "--json"]) == 0
+    wall = time.perf_counter() - t
     doc = json.loads(capsys.readouterr().out)
     assert len(doc["frames"]) == 6
+    # the store's opening (its run time, the samples completed at open) is part of the command, before any frame
+    assert 0 < doc["summary"]["open_seconds"] < wall - 1e-3 * sum(f["ms_total"] + f["ms_lights"] for f in doc["frames"])
     assert all(0 < f["triangles"] < doc["summary"]["full_triangles"] for f in doc["frames"])
     assert doc["summary"]["median_ms"] > 0
     later = [f["ms_total"] for f in doc["frames"][1:]]  # the mean counts every frame after the first

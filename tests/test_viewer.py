@@ -520,11 +520,14 @@ def test_path_summary_is_the_records_median_and_sums():
         sys.path.insert(0, bench)
     from ten_million import view_path
 
-    assert view_path(f"lodprt view: closed after 4 frames\nlodprt view: {line}\n") == {
+    opened = "lodprt view: out.zarr opened in 61.5 s - H prints the controls, Q quits\n"
+    assert view_path(f"{opened}lodprt view: closed after 4 frames\nlodprt view: {line}\n") == {
         "path": "dolly", "frames": 4.0, "median_ms_update": 20.0, "median_ms_draw": 6.0, "first_frame_ms": 1500.0,
-        "samples_completed": 5.0, "lights_seconds": 3.4, "max_seconds_lights": 2.5}
+        "samples_completed": 5.0, "lights_seconds": 3.4, "max_seconds_lights": 2.5, "open_seconds": 61.5}
     with pytest.raises(SystemExit, match="no path summary"):
-        view_path("lodprt view: closed after 4 frames\n")
+        view_path(f"{opened}lodprt view: closed after 4 frames\n")
+    with pytest.raises(SystemExit, match="no opening time"):
+        view_path(f"lodprt view: {line}\n")
 
 
 def test_view_command_plays_a_path_and_prints_its_summary(cut_store, monkeypatch, capsys):
@@ -537,6 +540,7 @@ def test_view_command_plays_a_path_and_prints_its_summary(cut_store, monkeypatch
     assert main(["view", str(cut_store), "--headless", "--frames", "3", "--size", "160", "120", "--path", "orbit"]) == 0
     out = capsys.readouterr().out
     assert "closed after 3 frames" in out
+    assert re.search(r"lodprt view: \S*cut\.zarr opened in [0-9.]+ s - headless, 3 frames", out)
     assert re.search(r"path orbit: 3 frames, median update \d+ ms and draw \d+ ms after the first \(\d+ ms\); "
                      r"setting the lights completed \d+ light samples in [0-9.]+ s", out)
     assert main(["view", str(cut_store), "--headless", "--frames", "2", "--size", "160", "120", "--path", "dolly",

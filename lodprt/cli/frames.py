@@ -48,10 +48,12 @@ def cmd_frames(args) -> int:
 
     cli_args.at_least("--frames", args.frames, 1)
     cli_args.at_least("--error-every", args.error_every, 0, " (0: no image error)")
+    t_open = time.perf_counter()
     store = open_store(args.store)
     rt = _runtime(store, criterion=cli_args.criterion(args), triangle_budget=args.triangle_budget,
                   frame_ms=args.frame_ms,
                   device=args.device, lod=not args.full, interpolation=args.interpolation, outside=args.outside)
+    open_seconds = time.perf_counter() - t_open  # the store and its run time, the samples completed at open included
     errors = _FrameErrors(store, rt) if args.error_every else None
     rows = []
     at_open = rt.samples.completed  # completed while the Runtime opened (its default light)
@@ -72,6 +74,7 @@ def cmd_frames(args) -> int:
         if errors is not None:
             errors.close()
     summary = _frames_summary(args, rt, store, rows, at_open)
+    summary["open_seconds"] = open_seconds
     if args.json:
         print(json.dumps({"summary": summary, "frames": rows}, indent=2))
         return 0
@@ -154,7 +157,8 @@ def _print_frames(rows, summary, rt) -> None:
           f"{summary['median_triangles']:,.0f} triangles of {summary['full_triangles']:,} on {rt.device}")
     print(f"setting the lights (not in the frame times): {summary['samples_completed']} light samples completed along "
           f"the path in {summary['lights_seconds']:.2f} s (longest {summary['max_ms_lights']:.0f} ms), "
-          f"{summary['samples_completed_at_open']} at open; the sample cache ended with "
+          f"{summary['samples_completed_at_open']} at open (opening the store took {summary['open_seconds']:.1f} s); "
+          f"the sample cache ended with "
           f"{summary['sample_cache_slots']} slots for the store's {summary['light_samples']} samples")
     if has_err:
         print(f"image error against the full mesh: median PSNR {summary['median_psnr_db']:.1f} dB (worst "

@@ -264,8 +264,10 @@ class Viewer:
             if progress is not None:
                 progress(done, total)
 
+        t_open = time.perf_counter()
         self.source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation,
                                    frame_ms=frame_ms, progress=opened)
+        self.open_seconds = time.perf_counter() - t_open  # the run time's set-up, its samples completed at open
         self.samples = sample_cache(self.source)  # the run time's (None: full resolution)
         if self.samples is not None:  # later completions report through the frame that needs them (_completing)
             self.samples.progress = None
@@ -456,8 +458,8 @@ class Viewer:
 def run_viewer(store, *, frames: int | None = None, screenshot=None, **options) -> int:
     """``lodprt view``: open the window, loop, return the exit status (LodprtError when no display)."""
     viewer = Viewer(store, **options)
-    print(f"lodprt view: {store.path} - " + ("headless, " + f"{frames} frames" if options.get("headless")
-                                              else "H prints the controls, Q quits"))
+    print(f"lodprt view: {store.path} opened in {viewer.open_seconds:.1f} s - "
+          + ("headless, " + f"{frames} frames" if options.get("headless") else "H prints the controls, Q quits"))
     n = viewer.run(frames, screenshot=screenshot)
     est = None if viewer.frame is None else viewer.frame.stats.get("estimated_psnr_db")
     print(f"lodprt view: closed after {n} frames ({viewer.state.knobs()}"
