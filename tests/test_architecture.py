@@ -194,3 +194,20 @@ def test_cli_choices_are_the_library_lists():
             if "--criterion" in a.option_strings:
                 choices.add(tuple(a.choices))
     assert choices == {tuple(CRITERIA)}
+
+
+def test_camera_paths_are_one_list():
+    """``lodprt frames --path`` and ``lodprt view --path`` offer exactly ``camera_path``'s paths, and ``frames``
+    runs ``PATH_FRAMES`` frames by default (a lap of ``view --path``: ``tests/test_viewer.py``); ``camera_path`` refuses any other name, listing them."""
+    from lodprt.cli.main import build_parser
+    from lodprt.errors import LodprtError
+    from lodprt.runtime.camera import PATH_FRAMES, PATHS, camera_path
+
+    commands = build_parser()._subparsers._group_actions[0].choices
+    for command in ("frames", "view"):
+        (path,) = [a for a in commands[command]._actions if "--path" in a.option_strings]
+        assert tuple(path.choices) == PATHS, command
+    (frames,) = [a for a in commands["frames"]._actions if "--frames" in a.option_strings]
+    assert frames.default == PATH_FRAMES
+    with pytest.raises(LodprtError, match="camera path 'spiral': choose one of orbit, dolly"):
+        next(camera_path(None, "spiral", 3))

@@ -499,6 +499,33 @@ def test_headless_viewer_plays_the_path_of_frames_and_pauses(cut_store, monkeypa
         v.window.destroy()
 
 
+def test_a_lap_is_path_frames_long_and_pause_stops_where_it_is(cut_store, monkeypatch):
+    """Without ``path_frames`` a lap of the path is ``lodprt frames``' default run (``PATH_FRAMES`` frames);
+    ``pause`` stops the path where it is (nothing advances) and ``toggle`` plays on from there."""
+    from types import SimpleNamespace
+
+    from lodprt.runtime.camera import PATH_FRAMES
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    v = headless(cut_store, path="dolly")
+    try:
+        player = v.player
+        assert len(player.steps) == PATH_FRAMES
+        state = SimpleNamespace(camera=v.state.camera, lights=None, selected=None, dirty=False)
+        assert player.advance(state) and player.index == 1
+        player.pause()
+        state.dirty = False
+        assert not player.advance(state) and player.index == 1 and not state.dirty
+        player.pause()  # pausing a paused path keeps it paused
+        assert player.paused
+        player.toggle()
+        assert player.advance(state) and player.index == 2
+        assert np.allclose(state.camera.eye, player.steps[1][0].eye)
+    finally:
+        v.renderer.release()
+        v.window.destroy()
+
+
 def test_path_summary_is_the_records_median_and_sums():
     """The closing summary of a played path: medians after the first frame, sums and the longest wait, exactly."""
     from lodprt.display.playback import PathPlayer, summary_line

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from lodprt.cli import args as cli_args
 from lodprt.cli import environment as environment_cli
-from lodprt.display.playback import LAP, PATHS
+from lodprt.runtime.camera import PATH_FRAMES, PATHS
 from lodprt.errors import LodprtError
 
 
@@ -120,7 +120,7 @@ def _add_view(sub) -> None:
                          "frames cost (update, draw, light samples completed)")
     vw.add_argument("--frames", type=int, default=None, metavar="N",
                     help=f"close after N frames (smoke tests); with --path, a lap of the path is N frames "
-                         f"(default {LAP})")
+                         f"(default {PATH_FRAMES})")
     vw.add_argument("--headless", action="store_true",
                     help="no window: draw --frames N frames with the overlay on an EGL context (no DISPLAY needed)")
     vw.add_argument("--screenshot", default=None, metavar="PNG", help="save the last frame drawn as a PNG")

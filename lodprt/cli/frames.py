@@ -8,6 +8,7 @@ import json
 import time
 
 from lodprt.cli import args as cli_args
+from lodprt.runtime.camera import PATH_FRAMES, PATHS
 
 FRAME_KEYS = ("triangles", "active_nodes", "nodes_touched", "refined", "coarsened", "ms_cut", "ms_triangulate",
               "ms_relight", "ms_total", "shadow_rays",
@@ -25,8 +26,9 @@ def register(sub) -> None:
         "samples they reach that the sample cache does not hold) and triangle counts.",
     )
     cli_args.add_store(fr)
-    fr.add_argument("--path", choices=("orbit", "dolly"), default="orbit", help="camera path (default orbit)")
-    fr.add_argument("--frames", type=int, default=120, metavar="N", help="number of frames (default 120)")
+    fr.add_argument("--path", choices=PATHS, default=PATHS[0], help=f"camera path (default {PATHS[0]})")
+    fr.add_argument("--frames", type=int, default=PATH_FRAMES, metavar="N",
+                    help=f"number of frames (default {PATH_FRAMES})")
     cli_args.add_view_cut(fr)
     fr.add_argument("--triangle-budget", type=int, default=None, metavar="T", help="steer the bound toward this many triangles")
     cli_args.add_frame_ms(fr)
@@ -73,8 +75,7 @@ def cmd_frames(args) -> int:
     finally:
         if errors is not None:
             errors.close()
-    summary = _frames_summary(args, rt, store, rows, at_open)
-    summary["open_seconds"] = open_seconds
+    summary = _frames_summary(args, rt, store, rows, at_open, open_seconds)
     if args.json:
         print(json.dumps({"summary": summary, "frames": rows}, indent=2))
         return 0
@@ -112,7 +113,7 @@ class _FrameErrors:
         self.renderer.release()
 
 
-def _frames_summary(args, rt, store, rows, at_open: int) -> dict:
+def _frames_summary(args, rt, store, rows, at_open: int, open_seconds: float) -> dict:
     import numpy as np
 
     ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
@@ -127,7 +128,7 @@ def _frames_summary(args, rt, store, rows, at_open: int) -> dict:
                "samples_completed": int(sum(r["samples_completed"] for r in rows)),
                "lights_seconds": 1e-3 * float(sum(r["ms_lights"] for r in rows)),
                "max_ms_lights": float(max(r["ms_lights"] for r in rows)),
-               "samples_completed_at_open": int(at_open),
+               "samples_completed_at_open": int(at_open), "open_seconds": float(open_seconds),
                "sample_cache_slots": int(rt.samples.slots), "light_samples": int(store.num_samples)}
     psnr = [r["psnr_db"] for r in rows if "psnr_db" in r]
     if psnr:

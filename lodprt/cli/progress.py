@@ -54,9 +54,13 @@ class ProgressBars:
         return self
 
     def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def close(self) -> None:
+        """Close every bar (a transient one leaves no line behind)."""
         for bar in self._bars.values():
             bar.close()
-        return False
 
 
 def with_progress(total: int, desc: str, unit: str, work):
@@ -77,7 +81,7 @@ def transient_bar(desc: str, unit: str):
     def update(done, total):
         advance(done, total)
         if done >= total:
-            bars.__exit__(None, None, None)
+            bars.close()
 
     return update
 

@@ -7,11 +7,6 @@ from __future__ import annotations
 import dataclasses
 import statistics
 
-# light at import: the CLI reads PATHS and LAP when it builds its parser
-PATHS = ("orbit", "dolly")
-#: frames in one lap of the path when ``--frames`` does not say (the default of ``lodprt frames``)
-LAP = 120
-
 
 class PathPlayer:
     """The ``frames`` (Camera, lights) of ``camera_path(source, path, frames)``, played in order and looped.
@@ -50,6 +45,10 @@ class PathPlayer:
 
     def toggle(self) -> None:
         self.paused = not self.paused
+
+    def pause(self) -> None:
+        """Stop where the path is (the user took the camera or a light); ``toggle`` plays on from there."""
+        self.paused = True
 
     def record(self, ms_lights: float, ms_update: float, ms_draw: float, completed: int) -> None:
         """What the frame just made on the path cost: setting its lights (the light samples they completed,

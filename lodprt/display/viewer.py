@@ -40,9 +40,9 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.display.overlay import Overlay, Slider, slider_layout
-from lodprt.display.playback import LAP, PathPlayer, summary_line
+from lodprt.display.playback import PathPlayer, summary_line
 from lodprt.display.render import Renderer
-from lodprt.runtime.camera import rotate_about
+from lodprt.runtime.camera import PATH_FRAMES, rotate_about
 from lodprt.runtime.frames import auto_white
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.criteria import CRITERIA, make_criterion, resolve_criterion
@@ -272,7 +272,7 @@ class Viewer:
         if self.samples is not None:  # later completions report through the frame that needs them (_completing)
             self.samples.progress = None
         #: ``--path``: the camera path played (``lodprt.display.playback``)
-        self.player = None if path is None else PathPlayer(self.source, path, path_frames or LAP, camera=camera,
+        self.player = None if path is None else PathPlayer(self.source, path, path_frames or PATH_FRAMES, camera=camera,
                                                            fixed_lights=fixed_lights)
         self.pushed = None  # the (error_bound, alpha) last given to the source
         self.ms_update = self.ms_draw = self.ms_lights = 0.0
@@ -348,7 +348,7 @@ class Viewer:
     def _pause(self) -> None:
         """The user takes the camera or a light: a playing path stops where it is."""
         if self.player is not None:
-            self.player.paused = True
+            self.player.pause()
 
     # -- loop ------------------------------------------------------------------------------------------------
     def step(self) -> None:

@@ -15,6 +15,11 @@ from lodprt.model.scene import referenced_bounds
 
 log = logging.getLogger(__name__)
 
+#: the camera paths ``camera_path`` knows (``lodprt frames --path``, ``lodprt view --path``)
+PATHS = ("orbit", "dolly")
+#: frames along a path when the user does not say: ``lodprt frames --frames``, one lap of ``lodprt view --path``
+PATH_FRAMES = 120
+
 
 @dataclasses.dataclass(frozen=True)
 class Camera:
@@ -109,8 +114,8 @@ def camera_path(rt, path: str, frames: int, *, size=(800, 600), fov: float = 40.
     """Yields ``frames`` (Camera, lights (1, 3)) pairs: ``orbit`` circles the objects at 2.2 object sizes, 25
     degrees above them; ``dolly`` moves from 3 object sizes to 0.8 straight toward them; the light circles inside
     the sampled light box ``light_turns`` times over the path."""
-    if path not in ("orbit", "dolly"):
-        raise LodprtError(f"camera path {path!r}: choose 'orbit' or 'dolly'")
+    if path not in PATHS:
+        raise LodprtError(f"camera path {path!r}: choose one of {', '.join(PATHS)}")
     b = object_bounds(rt.store)
     c = 0.5 * (b[0] + b[1])
     size_ = float(np.linalg.norm(b[1] - b[0])) or 1.0
