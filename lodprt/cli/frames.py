@@ -8,6 +8,7 @@ import json
 import time
 
 from lodprt.cli import args as cli_args
+from lodprt.display.playback import light_costs
 from lodprt.runtime.camera import PATH_FRAMES, PATHS
 
 FRAME_KEYS = ("triangles", "active_nodes", "nodes_touched", "refined", "coarsened", "ms_cut", "ms_triangulate",
@@ -125,9 +126,7 @@ def _frames_summary(args, rt, store, rows, at_open: int, open_seconds: float) ->
                "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
                "device": rt.device, "frame_ms_budget": rt.budgets.frame_ms,
                # setting the lights, apart from the frame times: the samples completed along the path and their time
-               "samples_completed": int(sum(r["samples_completed"] for r in rows)),
-               "lights_seconds": 1e-3 * float(sum(r["ms_lights"] for r in rows)),
-               "max_ms_lights": float(max(r["ms_lights"] for r in rows)),
+               **light_costs(rows),
                "samples_completed_at_open": int(at_open), "open_seconds": float(open_seconds),
                "sample_cache_slots": int(rt.samples.slots), "light_samples": int(store.num_samples)}
     psnr = [r["psnr_db"] for r in rows if "psnr_db" in r]

@@ -66,10 +66,16 @@ class PathPlayer:
         return {"path": self.path, "frames": len(rows),
                 "first_frame_ms": rows[0]["ms_update"],
                 "median_ms_update": float(statistics.median(r["ms_update"] for r in later)),
-                "median_ms_draw": float(statistics.median(r["ms_draw"] for r in later)),
-                "samples_completed": int(sum(r["samples_completed"] for r in rows)),
-                "lights_seconds": 1e-3 * sum(r["ms_lights"] for r in rows),
-                "max_ms_lights": max(r["ms_lights"] for r in rows)}
+                "median_ms_draw": float(statistics.median(r["ms_draw"] for r in later)), **light_costs(rows)}
+
+
+def light_costs(rows) -> dict:
+    """What setting the lights cost along a path, from its frames' records (each with ``samples_completed`` and
+    ``ms_lights``): the light samples completed, their seconds in all and the longest frame's wait in ms (the same
+    keys in ``lodprt frames``' summary and ``lodprt view``'s)."""
+    return {"samples_completed": int(sum(r["samples_completed"] for r in rows)),
+            "lights_seconds": 1e-3 * float(sum(r["ms_lights"] for r in rows)),
+            "max_ms_lights": float(max(r["ms_lights"] for r in rows))}
 
 
 def summary_line(summary: dict) -> str:
