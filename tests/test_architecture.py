@@ -198,7 +198,8 @@ def test_cli_choices_are_the_library_lists():
 
 def test_camera_paths_are_one_list():
     """``lodprt frames --path`` and ``lodprt view --path`` offer exactly ``camera_path``'s paths, and ``frames``
-    runs ``PATH_FRAMES`` frames by default (a lap of ``view --path``: ``tests/test_viewer.py``); ``camera_path`` refuses any other name, listing them."""
+    runs ``PATH_FRAMES`` frames by default (a lap of ``view --path``: ``tests/test_viewer.py``); ``camera_path``
+    refuses any other name, listing them."""
     from lodprt.cli.main import build_parser
     from lodprt.errors import LodprtError
     from lodprt.runtime.camera import PATH_FRAMES, PATHS, camera_path

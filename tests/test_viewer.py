@@ -475,7 +475,8 @@ def test_headless_viewer_plays_the_path_of_frames_and_pauses(cut_store, monkeypa
             twin.set_lights(lights)
             ref = twin.update()
             assert np.array_equal(v.frame.triangles, ref.triangles)
-            assert v.overlay_text(len(v.frame.triangles)).splitlines()[-2] == f"path orbit, frame {k % 4 + 1} of 4 (P pauses)"
+            status = v.overlay_text(len(v.frame.triangles)).splitlines()[-2]
+            assert status == f"path orbit, frame {k % 4 + 1} of 4 (P pauses)"
         played = v.player.played
         assert len(played) == 6 and sum(r["samples_completed"] for r in played) == v.samples.completed - done
         assert all(r["ms_update"] > 0 and r["ms_lights"] >= 0 for r in played)
@@ -640,7 +641,8 @@ def test_transient_bar_closes_once_its_total_is_reached(monkeypatch):
     update(0, 3)
     update(2, 3)
     assert len(made) == 1 and made[0].n == 2 and not made[0].closed
-    assert made[0].options == {"total": 3, "unit": "sample", "desc": "opening: completing light samples", "leave": False}
+    assert made[0].options == {"total": 3, "unit": "sample", "desc": "opening: completing light samples",
+                               "leave": False}
     update(3, 3)
     assert made[0].n == 3 and made[0].closed
 
