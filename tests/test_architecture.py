@@ -9,7 +9,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 #: stage of each subpackage, in the order data flows; a module may import its own subpackage and lower stages only
-STAGES = {"errors": 0, "devices": 0, "launches": 0, "version": 0, "deprecation": 0, "model": 1, "store": 2, "precompute": 3, "runtime": 4, "display": 5, "cli": 6}
+STAGES = {"errors": 0, "allocator": 0, "devices": 0, "launches": 0, "version": 0, "deprecation": 0, "model": 1, "store": 2, "precompute": 3, "runtime": 4, "display": 5, "cli": 6}
 
 
 def modules() -> dict[str, Path]:

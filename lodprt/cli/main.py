@@ -6,7 +6,7 @@ The parser is built from the command modules' ``register`` functions (:mod:`lodp
 :mod:`lodprt.cli.volume`, :mod:`lodprt.cli.export`; their shared arguments are in :mod:`lodprt.cli.args`). Errors lodprt raises on purpose (bad scene, bad store,
 unavailable device, a full disk) are printed as one line naming the file and field, with exit code 2; Ctrl-C
 (SIGINT) prints one line saying what the command left and exits with 130; anything else is a bug and keeps its
-traceback.
+traceback. The command's threads allocate from one malloc arena (:mod:`lodprt.allocator`).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import logging
 import os
 import sys
 
+from lodprt.allocator import one_malloc_arena
 from lodprt.cli import bake, compress, display, environment, export, frames, inspection, volume
 from lodprt.errors import LodprtError
 from lodprt.version import __version__
@@ -51,6 +52,7 @@ def as_flags(message: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    one_malloc_arena()  # before any thread allocates (lodprt.allocator: run-time and bake peaks)
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
     try:
