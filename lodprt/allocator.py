@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 
 #: the environment variable glibc reads at start-up, and the ``mallopt`` parameter that sets the same (malloc.h)
 ARENA_VARIABLE = "MALLOC_ARENA_MAX"
@@ -28,10 +29,10 @@ def one_malloc_arena() -> bool:
     """Make every thread of this process, and of the processes it starts, allocate from one malloc arena: set
     ``MALLOC_ARENA_MAX=1`` for child processes (a bake's local dask workers) and call glibc's ``mallopt`` for this
     one. Threads started before the call keep the arena they have. Nothing changes when ``MALLOC_ARENA_MAX`` is set
-    already (the user's value stands) or when the C library has no ``mallopt`` (not glibc). True when this process
-    now allocates from one arena."""
-    if os.environ.get(ARENA_VARIABLE):
-        return False
+    already (the user's value stands), off Linux, or when the C library has no working ``mallopt`` (musl's returns
+    0). True when this process now allocates from one arena."""
+    if not sys.platform.startswith("linux") or os.environ.get(ARENA_VARIABLE):
+        return False  # (ctypes.CDLL(None) is a TypeError on Windows)
     try:
         mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):

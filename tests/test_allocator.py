@@ -1,6 +1,7 @@
 """One malloc arena for the ``lodprt`` command (``lodprt.allocator``): threads that allocate at once share one arena
 after ``one_malloc_arena()`` and get arenas of their own without it (glibc's ``malloc_stats`` counts them), a
-``MALLOC_ARENA_MAX`` the user set stands, and the command line makes the call before it parses its arguments."""
+``MALLOC_ARENA_MAX`` the user set stands, the command line makes the call before it parses its arguments, and off
+Linux nothing is called."""
 
 import os
 import platform
@@ -10,7 +11,7 @@ import sys
 
 import pytest
 
-pytestmark = pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="mallopt and malloc_stats are glibc's")
+glibc = pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="mallopt and malloc_stats are glibc's")
 
 #: four threads allocate at the same time (a barrier holds each until all have allocated), then glibc prints its
 #: arenas on stderr; stdout: what one_malloc_arena returned and the environment variable after it
@@ -41,12 +42,14 @@ def run_child(code: str, *args, env_arena: str | None = None):
     return out.stdout.strip(), len(re.findall(r"^Arena \d+:", out.stderr, re.MULTILINE))
 
 
+@glibc
 def test_threads_share_one_arena_after_the_call():
     said, arenas = run_child(THREADS, "call")
     assert said == "True 1"
     assert arenas == 1
 
 
+@glibc
 def test_threads_get_arenas_of_their_own_without_it():
     """The control: the same threads without the call make arenas of their own (what the call prevents)."""
     said, arenas = run_child(THREADS, "skip")
@@ -54,15 +57,34 @@ def test_threads_get_arenas_of_their_own_without_it():
     assert arenas >= 3
 
 
+@glibc
 def test_the_users_setting_stands():
     said, arenas = run_child(THREADS, "call", env_arena="3")
     assert said == "False 3"
     assert 1 < arenas <= 3  # glibc read the user's limit at start-up
 
 
+@glibc
 def test_the_command_line_calls_it_before_parsing():
     """``lodprt --version`` exits while parsing: the arena is set by then, and child processes inherit it."""
     code = ("import os\nfrom lodprt.cli.main import main\ntry:\n    main(['--version'])\nexcept SystemExit:\n"
             "    pass\nprint(os.environ.get('MALLOC_ARENA_MAX'))")
     said, _ = run_child(code)
     assert said.splitlines()[-1] == "1"
+
+
+def test_off_linux_nothing_changes(monkeypatch):
+    """On Windows ``ctypes.CDLL(None)`` is a TypeError and macOS has no ``mallopt``: the call is a no-op there."""
+    import ctypes
+
+    from lodprt import allocator
+
+    def no_library(*args, **kwargs):
+        raise AssertionError("the C library was opened off Linux")
+
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
+    monkeypatch.setattr(ctypes, "CDLL", no_library)
+    for name in ("win32", "darwin"):
+        monkeypatch.setattr(allocator.sys, "platform", name)
+        assert allocator.one_malloc_arena() is False
+        assert "MALLOC_ARENA_MAX" not in os.environ
