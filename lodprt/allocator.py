@@ -7,8 +7,8 @@ the system only from their top, so the freed temporaries of each light sample co
 beside the next sample's. Measured on the bunny + 1000 floor (1.04M vertices, 27 samples, ``lodprt view --path
 orbit --frames 10``): the viewer's resident peak climbed by 30-45 MB a sample completed, to 1.72 GB headless and
 2.00 GB in a window, where ``lodprt frames`` on the same store peaked at 1.48 GB; with one arena the viewer
-peaked at 1.39 GB, ``frames`` at 1.35 GB and ``lodprt bake`` at 1.15 GB against 1.38 GB, their frame and bake
-times unchanged (docs/SCALE.md, "Ten million vertices on this machine").
+peaked at 1.43 and 1.46 GB, ``frames`` at 1.29 GB and ``lodprt bake`` at 1.15 GB against 1.38 GB, their frame
+and bake times unchanged (docs/SCALE.md, "One malloc arena").
 
 ``one_malloc_arena()`` is the first thing ``lodprt.cli.main`` does; a program that uses the library from Python can
 call it first too, or set ``MALLOC_ARENA_MAX=1`` in its environment.
