@@ -1,0 +1,138 @@
+"""The sequential hierarchy build (``lodprt.model.hierarchy_greedy``, rule H-G): every collapse legal on the mesh as
+it stands (the rounds build's replay oracle), the same node attributes, one collapse per vertex and round, the
+same hierarchy on any number of threads, and the rounds build's base sizes and rules on awkward meshes."""
+
+import numpy as np
+import pytest
+
+from lodprt.errors import LodprtError
+from lodprt.model.hierarchy_build import build_hierarchy
+from lodprt.model.hierarchy_greedy import build_greedy
+from lodprt.model.scene import vertex_normals
+from lodprt.runtime.view_cut import Cut
+from test_hierarchy import check_cones, check_forest, check_radii, face_normals, flat_grid, replay_collapses, wavy_grid
+
+
+def greedy(pos, faces, **kw):
+    pos = np.asarray(pos, float)
+    return build_greedy(pos, faces, vertex_normals(pos, np.asarray(faces)), **kw)
+
+
+def two_grids():
+    pa, fa = wavy_grid(20, seed=1)
+    pb, fb = wavy_grid(14, lift=5.0, seed=2)
+    return np.r_[pa, pb], np.r_[fa, fb + len(pa)]
+
+
+@pytest.mark.warp_debug
+@pytest.mark.parametrize("mesh", ["wavy12", "wavy24", "two"])
+def test_every_collapse_is_legal_on_the_mesh_as_it_stands(mesh):
+    """Replayed one by one in creation order on a plain Python mesh, every collapse is a legal half-edge collapse
+    of the mesh as it stands then, its recorded neighbours are v's and its error vector v's offset from the closest
+    point of the faces around u (``replay_collapses``, float64 brute force); the nodes form a binary forest of
+    half-edge collapses."""
+    pos, faces = two_grids() if mesh == "two" else wavy_grid(int(mesh[4:]))
+    h = greedy(pos, faces)
+    replay_collapses(pos, faces, h)
+    check_forest(h, len(pos), np.isin(np.arange(len(pos)), faces))
+    assert h.method == "greedy" and h.num_nodes > len(pos)
+
+
+def test_one_collapse_per_vertex_and_round():
+    """Rule H-G: a vertex is an endpoint of at most one collapse per round, so a node is at most one level above
+    its children per round: the depth is at most the rounds made (``levels``)."""
+    pos, faces = wavy_grid(30)
+    h = greedy(pos, faces)
+    assert 0 < h.depth <= h.levels, (h.depth, h.levels)
+
+
+def test_the_same_hierarchy_on_any_number_of_threads():
+    """Parts are whole groups, dealt the same way whatever the threads, and share nothing: bit for bit."""
+    pos, faces = two_grids()
+    one, two = greedy(pos, faces, workers=1), greedy(pos, faces, workers=2)
+    for name in one.ARRAYS:
+        np.testing.assert_array_equal(getattr(one, name), getattr(two, name), err_msg=name)
+
+
+def test_components_never_merge_and_component_splits():
+    """No collapse joins two connected components, nor two values of ``component`` within one."""
+    pos, faces = two_grids()
+    na = 20 * 20
+    h = greedy(pos, faces)
+    internal = np.arange(len(pos), h.num_nodes)
+    side = h.vertex[internal] < na
+    assert (side == (h.vertex[h.children[internal, 1]] < na)).all()
+    comp = (pos[:, 0] > 9.5).astype(np.int64)  # cut the first grid in two along x
+    h = greedy(pos, faces, component=comp)
+    internal = np.arange(len(pos), h.num_nodes)
+    assert (comp[h.vertex[internal]] == comp[h.vertex[h.children[internal, 1]]]).all()
+
+
+@pytest.mark.parametrize("n, target", [(61, 64), (41, 16)])
+def test_flat_grid_reaches_its_target_base_and_keeps_its_outline(n, target):
+    """As the rounds build (``test_hierarchy``): at most target + 2 roots, the four corners among them, the base
+    covering the whole square with no face turned over; with ``keep_boundary`` the whole rim stays."""
+    pos, faces, normals, rim = flat_grid(n)
+    h = build_greedy(pos, faces, normals, target_base=target)
+    assert len(h.roots) <= target + 2, len(h.roots)
+    assert np.isin(rim[:4], h.vertex[h.roots]).all()
+    tri = Cut.base(h, faces).triangles()
+    cross = face_normals(pos, tri)
+    assert len(tri) <= target and (cross[:, 1] > 0).all()
+    assert np.linalg.norm(cross, axis=1).sum() / 2 == pytest.approx(4.0, rel=1e-9)
+    kept = build_greedy(pos, faces, normals, target_base=target, keep_boundary=True)
+    assert np.isin(rim, kept.vertex[kept.roots]).all() and len(kept.roots) < len(rim) + 64
+
+
+@pytest.mark.warp_debug
+def test_awkward_meshes_build_and_non_manifold_vertices_stay():
+    """A single triangle, a duplicated vertex, an unreferenced vertex, a repeated corner and a fin (three faces on
+    one edge): the build finishes, the fin's edge ends take part in no collapse, the full cut gives back the
+    faces (less the one with a repeated corner)."""
+    h = greedy([[0, 0, 0], [1, 0, 0], [0, 0, 1]], [[0, 2, 1]])
+    assert h.num_nodes >= 3
+    g = np.stack(np.meshgrid(np.arange(6.0), np.arange(6.0), indexing="ij"), -1).reshape(-1, 2)
+    pos = np.c_[g[:, 0], 0.1 * np.sin(g[:, 0] * g[:, 1]), g[:, 1]]
+    i, j = np.meshgrid(np.arange(5), np.arange(5), indexing="ij")
+    a = (i * 6 + j).ravel()
+    quad = np.r_[np.c_[a, a + 1, a + 6], np.c_[a + 1, a + 7, a + 6]]
+    pos = np.r_[pos, pos[[7]], [[1, 1, 1]], [[9, 9, 9]]]  # 36: duplicate of 7, 37: fin tip, 38: unreferenced
+    faces = np.r_[quad, [[36, 8, 14]], [[7, 8, 37]], [[3, 3, 4]]]
+    h = greedy(pos, faces)
+    movers = np.r_[h.vertex[h.children[36:][h.children[36:, 1] >= 0, 1]]] if h.num_nodes > 39 else np.zeros(0, int)
+    assert not np.isin([7, 8], movers).any()  # the fin's edge (three faces) ends never collapse
+    assert h.parent[38] == -1
+    assert np.isfinite(h.cone_axis).all() and np.isfinite(h.error_vector).all()
+    good = faces[:-1]
+    np.testing.assert_array_equal(Cut.full(h, good).triangles(), good)
+
+
+@pytest.mark.warp_debug
+def test_bunny_floor_attributes_and_base_match_the_rounds_build(bunny_floor, bunny_hierarchy):
+    """On the bunny and its floor: a forest of half-edge collapses, every leaf normal inside its ancestors' cones,
+    every radius holding its leaves (a sample of nodes), zero error vectors on the flat floor and not on the
+    bunny, and a base within 5% (or 8 roots) of the rounds build's."""
+    s = bunny_floor
+    h = build_greedy(s.positions, s.faces, s.normals, component=s.object_id)
+    V = s.num_vertices
+    check_forest(h, V, np.isin(np.arange(V), s.faces))
+    check_cones(h, s.normals)
+    rng = np.random.default_rng(0)
+    check_radii(h, s.positions, rng.choice(np.arange(V, h.num_nodes), 40, replace=False))
+    internal = np.arange(V, h.num_nodes)
+    on_floor = s.object_id[h.vertex[internal]] == s.object_id[-1]
+    err = np.linalg.norm(h.error_vector[internal], axis=1)
+    assert err[on_floor].max() < 1e-6 and err[~on_floor].max() > 1e-5
+    rounds = build_hierarchy(s.positions, s.faces, s.normals, component=s.object_id)
+    assert abs(len(h.roots) - len(rounds.roots)) <= max(0.05 * len(rounds.roots), 8)
+
+
+def test_bad_input_is_refused_naming_the_field():
+    with pytest.raises(LodprtError, match="faces"):
+        build_greedy(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((3, 3)))
+    with pytest.raises(LodprtError, match="non-finite"):
+        build_greedy(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), np.zeros((3, 3)))
+    with pytest.raises(LodprtError, match="normals"):
+        build_greedy(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros((2, 3)))
+    with pytest.raises(LodprtError, match="component"):
+        build_greedy(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros((3, 3)), component=np.zeros(2, int))
