@@ -1,5 +1,6 @@
 """Vertex hierarchy builds compared on the same meshes in the same run: the rounds build (default) against the
-pymeshlab-seeded build (``build_hierarchy(method="pymeshlab")``), and pymeshlab's plain QEM decimation.
+sequential build (``lodprt.model.hierarchy_greedy.build_greedy``, opt-in), the pymeshlab-seeded build
+(``build_hierarchy(method="pymeshlab")``), and pymeshlab's plain QEM decimation.
 
     python benchmarks/hierarchy.py [--quick] [--json PATH] [--device cpu|cuda]
 
@@ -7,8 +8,8 @@ Meshes: the Stanford bunny (tests/data) on a 380 x 380 floor (180,347 vertices, 
 (quick: the bunny on a 60 x 60 floor). Every build runs in a fresh child process (``python benchmarks/hierarchy.py --child
 METHOD MESH``), which reports:
 
-* ``build s``: ``build_hierarchy``'s own time (the rounds build: the best of ``REPEATS`` builds in the child, on
-  every core; the others: one build); ``B/vertex``: the child's peak resident memory (``VmHWM``) above its
+* ``build s``: the build's own time (the rounds and the sequential build: the best of ``REPEATS`` builds in the
+  child, on every core; the others: one build); ``B/vertex``: the child's peak resident memory (``VmHWM``) above its
   resident size just before the first build, per vertex; ``worker MiB``: the largest peak of the pymeshlab worker
   processes (``RUSAGE_CHILDREN``; fresh interpreters, so Python, numpy and pymeshlab's own ~100 MiB included; at
   most ``workers`` of them run at once);
@@ -22,7 +23,7 @@ METHOD MESH``), which reports:
 ``pymeshlab 1p`` is the pymeshlab build on one process (build only); ``QEM only`` is pymeshlab decimating the
 whole scene straight to the rounds build's base size in one call (time only); ``meshopt 1/2`` is meshoptimizer's
 ``simplify`` halving the same scene in the same run (time only; ``x meshopt``: each build's time over it, the
-issue's yardstick: at most 10 for the rounds build). Writes
+issue's yardstick: at most 10). Writes
 benchmarks/results/hierarchy[-quick].json and .png.
 """
 
@@ -102,13 +103,24 @@ def child(method: str, name: str, device: str) -> dict:
     load_kernels("cpu", kernels)  # the round kernels' module (compiled once, then loaded from Warp's cache)
     if method.startswith("pymeshlab"):
         import pymeshlab  # noqa: F401  (its import, about 30 MiB, is not the build's memory)
+    from lodprt.model.hierarchy_greedy import build_greedy
+
+    if method == "greedy":
+        build_greedy(scene.positions[:3], np.array([[0, 1, 2]]), scene.normals[:3])  # its kernels, compiled or loaded
     before = _status("VmRSS")
     workers = 1 if method == "pymeshlab-1p" else None
-    h = build_hierarchy(scene.positions, scene.faces, scene.normals, method=method.split("-")[0], workers=workers)
+
+    def build():
+        if method == "greedy":
+            return build_greedy(scene.positions, scene.faces, scene.normals)
+        return build_hierarchy(scene.positions, scene.faces, scene.normals, method=method.split("-")[0],
+                               workers=workers)
+
+    h = build()
     peak = _status("VmHWM") - before
     seconds = [h.build_seconds]
-    for _ in range(REPEATS - 1 if method == "rounds" else 0):  # the best of a few: the cores are shared
-        seconds.append(build_hierarchy(scene.positions, scene.faces, scene.normals, workers=workers).build_seconds)
+    for _ in range(REPEATS - 1 if method in ("rounds", "greedy") else 0):  # the best of a few: the cores are shared
+        seconds.append(build().build_seconds)
     out = {"method": method, "mesh": scene.source, "vertices": scene.num_vertices, "build_s": min(seconds),
            "bytes_per_vertex": peak / scene.num_vertices,
            "worker_mib": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
@@ -156,7 +168,7 @@ def plot(rows: list[dict], name: str) -> None:
     import matplotlib.pyplot as plt
 
     meshes = list(dict.fromkeys(r["mesh"] for r in rows))
-    methods = ("rounds", "pymeshlab")
+    methods = ("rounds", "greedy", "pymeshlab")
     panels = (("build_s", "build seconds"), ("bytes_per_vertex", "peak bytes / vertex (main process)"),
               ("light_cut_vertices", "5-degree light cut: vertices kept"), ("view_triangles", "view cut triangles"))
     fig, axes = plt.subplots(1, len(panels), figsize=(14, 3.2))
@@ -164,7 +176,7 @@ def plot(rows: list[dict], name: str) -> None:
     for ax, (key, title) in zip(axes, panels):
         for j, m in enumerate(methods):
             vals = [next((r.get(key, 0) for r in rows if r["mesh"] == me and r["method"] == m), 0) for me in meshes]
-            ax.barh(y + (0.2 if j == 0 else -0.2), vals, 0.4, label=m)
+            ax.barh(y + 0.27 * (1 - j), vals, 0.27, label=m)
         if key == "build_s":  # meshoptimizer's halving and 10x it, the yardstick
             half = [next((r["meshopt_s"] for r in rows if r["mesh"] == me and "meshopt_s" in r), 0) for me in meshes]
             ax.plot(half, y, "k|", ms=14, label="meshopt 1/2")
@@ -189,7 +201,7 @@ def main():
     device = resolve_device(args.device)
     rows = []
     for name in QUICK if args.quick else FULL:
-        methods = ("rounds", "pymeshlab") + (("pymeshlab-1p",) if name == "bunny380" else ())
+        methods = ("rounds", "greedy", "pymeshlab") + (("pymeshlab-1p",) if name == "bunny380" else ())
         for method in methods:
             rows.append(run_child(method, name, device))
             r = rows[-1]
@@ -205,8 +217,9 @@ def main():
                 r["meshopt_s"], r["x_meshopt"] = half, r["build_s"] / half
         rows.append({"method": "meshopt 1/2", "mesh": rounds["mesh"], "vertices": rounds["vertices"],
                      "build_s": half, "meshopt_s": half, "x_meshopt": 1.0})
-        print(f"{rounds['mesh']}: meshoptimizer halving {half:.3f} s, rounds build {rounds['x_meshopt']:.1f}x it",
-              flush=True)
+        seq = next(r for r in rows if r["mesh"] == rounds["mesh"] and r["method"] == "greedy")
+        print(f"{rounds['mesh']}: meshoptimizer halving {half:.3f} s, rounds build {rounds['x_meshopt']:.1f}x it, "
+              f"sequential build {seq['x_meshopt']:.1f}x", flush=True)
     print(table(rows, [("mesh", "mesh", "s"), ("method", "build", "s"), ("vertices", "vertices", ","),
                        ("build_s", "build s", ".2f"), ("x_meshopt", "x meshopt", ".1f"), ("bytes_per_vertex", "B/vertex", ".0f"),
                        ("worker_mib", "worker MiB", ".0f"), ("roots", "roots", ","), ("depth", "depth", "d"),

@@ -196,7 +196,8 @@ def light_spacing(r: dict) -> str:
 
 
 def hierarchy(r: dict) -> str:
-    label = {"rounds": "`rounds`", "pymeshlab": "`pymeshlab` (2 worker processes)",
+    label = {"rounds": "`rounds`", "greedy": "sequential (`build_greedy`, opt-in)",
+             "pymeshlab": "`pymeshlab` (2 worker processes)",
              "pymeshlab-1p": "`pymeshlab` (`workers=1`, in process)", "QEM only": "pymeshlab alone, to the same base"}
     rows = []
     for row in r["rows"]:

@@ -1,13 +1,10 @@
 """Hierarchy build in sequence (SPEC 3; thesis 3.2, figures 5, 6, 7 and 10; tag H-G), float64 Warp kernels, one
 thread each: the whole build of a set of mesh groups in one launch.
 
-The host (``lodprt.model.hierarchy_greedy``) splits the groups into parts, launches ``greedy_build`` once per part
-(from its own thread: the parts share no vertex, face, node or scratch entry) and compacts the node ids.
+The host (``lodprt.model.hierarchy_greedy``) splits the mesh into units (components, or tiles whose borders wait),
+prepares the mesh (``lodprt.kernels.hierarchy_prepare``), launches ``greedy_build`` once per unit (from several threads, each with its own scratch and queue: units share no
+vertex or face they change, nor a node id) and compacts the node ids.
 
-* ``prepare``: the corner list of every vertex (a singly linked list through the corners ``3 f + j``), the
-  Garland-Heckbert face quadrics (area x plane plane^T), boundary and non-manifold flags, and the boundary planes
-  (``boundary_weight |e|^2``, perpendicular to the edge's face); what ``lodprt.model.hierarchy_build`` computes for
-  the rounds build.
 * ``greedy_build``: rounds of half-edge collapses made one at a time on the mesh as it stands (rule H-G,
   docs/HIERARCHY.md). A queue of proposals keyed by (round, cost class, position: blocks of ``bsize`` vertex ids
   visited in a fixed permuted order) hands out the cheapest proposal of the round; a collapse makes its two
@@ -23,7 +20,7 @@ import warp as wp
 
 from lodprt.kernels.hierarchy import closest_on_triangle, quadric_at, vec_at
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options({"enable_backward": False, "optimization_level": 3})
 
 #: the cost of an edge that is no candidate move
 NONE = wp.constant(wp.float64(1.0e300))
@@ -46,7 +43,8 @@ class Mesh:
     movable: wp.array(dtype=wp.uint8)  # (V,) 1 where the vertex may collapse
     group: wp.array(dtype=wp.int32)  # (V,) mesh group; moves stay within one
     group_faces: wp.array(dtype=wp.int32)  # (G,) live faces of each group
-    face_group: wp.array(dtype=wp.int32)  # (F,) the group a face counts for (its first corner's)
+    face_group: wp.array(dtype=wp.int32)  # (F,) the counter a face counts in (this phase's unit of the face)
+    count_group: wp.array(dtype=wp.int32)  # (V,) the counter whose faces stop the vertex's collapses
     quadric: wp.array2d(dtype=wp.float64)  # (V, 10) QEM quadrics (summed at every collapse)
 
 
@@ -59,6 +57,7 @@ class Scratch:
     ring: wp.array(dtype=wp.int32)  # (2 CAP + 2,) two rings: [0, CAP) and [CAP, 2 CAP)
     rcnt: wp.array(dtype=wp.int32)  # (2 CAP + 2,) faces on each ring edge
     cost: wp.array(dtype=wp.float64)  # (CAP + 2,) candidate costs of one evaluation
+    stamp: wp.array(dtype=wp.int32)  # (1,) the last stamp used: seen/slot outlive a launch
 
 
 @wp.struct
@@ -279,8 +278,8 @@ def merge_cone(a1: wp.vec3d, t1: wp.float64, a2: wp.vec3d, t2: wp.float64):
 
 
 @wp.func
-def evaluate(m: Mesh, s: Scratch, q: Queue, t: State, v: int, nv: int, st: int, edge_weight: wp.float64,
-             fold_cos: wp.float64, sliver: wp.float64, max_valence: int):
+def evaluate(m: Mesh, s: Scratch, q: Queue, t: State, part: wp.array(dtype=wp.int32), me: int, v: int, nv: int,
+             st: int, edge_weight: wp.float64, fold_cos: wp.float64, sliver: wp.float64, max_valence: int):
     """v's cheapest legal move (its ring in s.ring[:nv]) becomes its entry in this round; none: no entry (a later
     collapse around v marks it again). Returns the stamp last used."""
     t.pending[v] = wp.uint8(0)
@@ -293,7 +292,7 @@ def evaluate(m: Mesh, s: Scratch, q: Queue, t: State, v: int, nv: int, st: int, 
     for i in range(nv):
         u = s.ring[i]
         s.cost[i] = NONE
-        if m.frozen[u] != wp.uint8(0) or s.rcnt[i] != need or m.group[u] != m.group[v]:
+        if m.frozen[u] != wp.uint8(0) or s.rcnt[i] != need or m.group[u] != m.group[v] or part[u] != me:
             continue
         pu = vec_at(m.pos, u)
         d = pu - pv
@@ -359,8 +358,8 @@ def record(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, v: int, u: int, n
 
 
 @wp.func
-def collapse(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, v: int, u: int, nv: int, st: int, node_base: int,
-             rnd: int):
+def collapse(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, part: wp.array(dtype=wp.int32), me: int, v: int,
+             u: int, nv: int, st: int, node_base: int, rnd: int):
     """Make v -> u: its node, the faces (those on uv vanish, the others move to u), Q_u += Q_v, the error vector
     (figure 10), and the survivor's new ring marked for evaluation. Returns the stamp last used."""
     k = record(m, s, q, t, nd, v, u, nv, node_base)
@@ -405,6 +404,8 @@ def collapse(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, v: int, u: int,
         w = u
         if i < n:
             w = s.ring[i]
+        if part[w] != me:
+            continue  # a tile's border vertex: read only until the phase that owns it
         t.modt[w] = int(q.ctr[1])
         if m.movable[w] != wp.uint8(0) and t.dead[w] == wp.uint8(0) and t.pending[w] == wp.uint8(0):
             t.pending[w] = wp.uint8(1)
@@ -446,13 +447,13 @@ def held(s: Scratch, t: State, v: int, u: int, nv: int, c: int, rnd: int):
 @wp.kernel
 def greedy_build(
     m: Mesh,  # In/Out: the mesh, collapsed in place
-    s: Scratch,  # Temp: this part's rings (seen/slot are per vertex: parts share no vertex)
-    q: Queue,  # Temp: this part's queue
+    s: Scratch,  # Temp: this thread's rings
+    q: Queue,  # Temp: this thread's queue (empty again at the end); q.ctr this unit's counters
     t: State,  # Temp: per-vertex state (parts share no vertex)
-    nd: Nodes,  # Out: nodes node_base.. of this part, its neighbours from q.ctr[2]
-    part: wp.array(dtype=wp.int32),  # In: (V,) the part of each vertex (whole connected components)
-    me: int,  # In: this launch's part
-    node_base: int,  # In: id of this part's first node
+    nd: Nodes,  # Out: nodes node_base.. of this unit, its neighbours from q.ctr[2]
+    part: wp.array(dtype=wp.int32),  # In: (V,) the unit of each vertex (-1: it waits for a later phase)
+    me: int,  # In: this launch's unit
+    node_base: int,  # In: id of this unit's first node
     target_base: int,  # In: a group stops once it has at most this many faces
     edge_weight: wp.float64,  # In: weight of |uv|^4 in the cost
     fold_cos: wp.float64,  # In: a moved face keeps its normal within this cosine
@@ -461,10 +462,10 @@ def greedy_build(
 ):
     V = m.pos.shape[0]
     for v in range(V):  # every movable vertex starts unevaluated (class 0), in the queue's order
-        if m.movable[v] != wp.uint8(0) and part[v] == me:
+        if m.movable[v] != wp.uint8(0) and part[v] == me and t.dead[v] == wp.uint8(0):
             t.pending[v] = wp.uint8(1)
-            push(q, wp.float64(-1.0), v, 0, 0)
-    st = V  # above every stamp ``prepare`` left in s.seen (vertex ids)
+            push(q, wp.float64(-1.0), v, t.version[v], 0)
+    st = wp.max(V, s.stamp[0])  # above every stamp ``prepare`` (vertex ids) or an earlier launch left in s.seen
     while True:
         r, v = pop(q)
         if r < 0:
@@ -475,7 +476,7 @@ def greedy_build(
         ver = q.ver[v]
         rnd = int(q.ctr[8])
         q.ctr[4] = q.ctr[4] + wp.int64(1)
-        if t.dead[v] != wp.uint8(0) or ver != t.version[v] or m.group_faces[m.group[v]] <= target_base:
+        if t.dead[v] != wp.uint8(0) or ver != t.version[v] or m.group_faces[m.count_group[v]] <= target_base:
             continue
         u = t.target[v]
         c = r % CLASSES
@@ -499,100 +500,7 @@ def greedy_build(
                 same = t.checked[v] != wp.uint8(0) and t.modt[u] <= t.evalt[v] and t.modt[v] <= t.evalt[v]
                 if same or legal(m, s, v, u, nv, s.rcnt[i], st, fold_cos, sliver, max_valence):
                     t.used[v] = rnd
-                    st = collapse(m, s, q, t, nd, v, u, nv, st, node_base, rnd)
+                    st = collapse(m, s, q, t, nd, part, me, v, u, nv, st, node_base, rnd)
                     continue
-        st = evaluate(m, s, q, t, v, nv, st, edge_weight, fold_cos, sliver, max_valence)
-
-
-@wp.func
-def add_plane(quadric: wp.array2d(dtype=wp.float64), x: int, n: wp.vec3d, d: wp.float64, w: wp.float64):
-    """Q_x += w (n, d)(n, d)^T, the 10 entries in the order of ``QUADRIC_ENTRIES``."""
-    p = wp.vec4d(n[0], n[1], n[2], d)
-    k = int(0)
-    for r in range(4):
-        for c in range(r, 4):
-            quadric[x, k] += w * p[r] * p[c]
-            k += 1
-
-
-@wp.func
-def face_normal(m: Mesh, f: int):
-    """Unit normal of face f (zero for a degenerate face) and twice its area."""
-    p0 = vec_at(m.pos, m.faces[f, 0])
-    cr = wp.cross(vec_at(m.pos, m.faces[f, 1]) - p0, vec_at(m.pos, m.faces[f, 2]) - p0)
-    dbl = wp.length(cr)
-    if dbl > wp.float64(0.0):
-        return cr / dbl, dbl
-    return wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0)), dbl
-
-
-@wp.func
-def boundary_planes(m: Mesh, s: Scratch, a: int, nr: int, boundary_weight: wp.float64):
-    """For each boundary edge a b (b > a) of a's ring: the plane through it perpendicular to its face, weighted
-    ``boundary_weight |ab|^2``, added to Q_a and Q_b."""
-    for i in range(nr):
-        b = s.ring[i]
-        if s.rcnt[i] != 1 or b < a:
-            continue
-        fn = wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0))
-        c = m.head[a]
-        while c >= 0:
-            f = c // 3
-            c = m.nxt[c]
-            if m.faces[f, 0] == b or m.faces[f, 1] == b or m.faces[f, 2] == b:
-                fn, dbl = face_normal(m, f)
-                break
-        pa = vec_at(m.pos, a)
-        dd = vec_at(m.pos, b) - pa
-        mm = wp.cross(dd, fn)
-        lm = wp.length(mm)
-        if lm > wp.float64(0.0):
-            mm = mm / lm
-        w = boundary_weight * wp.dot(dd, dd)
-        add_plane(m.quadric, a, mm, -wp.dot(mm, pa), w)
-        add_plane(m.quadric, b, mm, -wp.dot(mm, pa), w)
-
-
-@wp.kernel
-def prepare(
-    m: Mesh,  # In: pos, faces, alive (all 1), movable (1 where the vertex may move: used, and not on the rim when
-    #            the rim is kept); Out: head, nxt, quadric, boundary, frozen, movable (frozen ones cleared)
-    s: Scratch,  # Temp
-    boundary_weight: wp.float64,  # In: weight of the boundary planes relative to the face quadrics
-):
-    V = m.pos.shape[0]
-    F = m.faces.shape[0]
-    for c in range(3 * F - 1, -1, -1):  # each vertex's corners in increasing order
-        v = m.faces[c // 3, c % 3]
-        m.nxt[c] = m.head[v]
-        m.head[v] = c
-    for f in range(F):  # Garland-Heckbert: area x plane plane^T at each corner
-        n, dbl = face_normal(m, f)
-        if dbl <= wp.float64(0.0):
-            continue
-        d = -wp.dot(n, vec_at(m.pos, m.faces[f, 0]))
-        for j in range(3):
-            add_plane(m.quadric, m.faces[f, j], n, d, wp.float64(0.5) * dbl)
-    for a in range(V):
-        if m.head[a] < 0:
-            continue
-        nr = gather(m, a, a, s.seen, s.slot, s.ring, s.rcnt, 0)
-        if nr > CAP:
-            m.frozen[a] = wp.uint8(1)
-            continue
-        rim = int(0)
-        for i in range(nr):
-            if s.rcnt[i] == 1:
-                rim += 1
-            if s.rcnt[i] > 2:
-                m.frozen[a] = wp.uint8(1)  # a non-manifold edge (its other end marks itself too)
-        if rim > 0:
-            m.boundary[a] = wp.uint8(1)
-        if rim != 0 and rim != 2:
-            m.frozen[a] = wp.uint8(1)  # a non-manifold boundary vertex (bow tie)
-        boundary_planes(m, s, a, nr, boundary_weight)
-    for a in range(V):
-        if m.frozen[a] != wp.uint8(0) or (m.boundary[a] != wp.uint8(0) and m.movable[a] == wp.uint8(2)):
-            m.movable[a] = wp.uint8(0)
-        elif m.movable[a] != wp.uint8(0):
-            m.movable[a] = wp.uint8(1)
+        st = evaluate(m, s, q, t, part, me, v, nv, st, edge_weight, fold_cos, sliver, max_valence)
+    s.stamp[0] = st + 1

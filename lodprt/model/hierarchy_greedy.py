@@ -2,18 +2,21 @@
 
 The same kind of hierarchy as ``lodprt.model.hierarchy_build`` (legal half-edge collapses ``v -> u`` in creation
 order, the same costs, legality rules, cones, radii, error vectors and recorded neighbours), made by one Warp
-thread per part of the mesh instead of rounds of parallel passes: a collapse is made on the mesh as it stands and
+thread per unit of the mesh instead of rounds of parallel passes: a collapse is made on the mesh as it stands and
 only the survivor's ring is evaluated again, so the build evaluates about 3 moves per collapse where the rounds
 evaluate every live vertex every round (docs/HIERARCHY.md, "The sequential build"). Opt-in for now:
 ``bake(scene, path, tree=build_greedy(...))``.
 
-Parts are whole connected components (each holding its groups: split further by ``component``), at most ``PARTS``
-of them, balanced by their movable vertices; the parts run at once on up to ``workers`` threads (a CPU launch releases the GIL) and share no
-vertex, face or node, so the hierarchy is the same, bit for bit, on any number of threads.
+Units are whole connected components (each holding its groups: split further by ``component``); a component with
+more than ``TILE`` movable vertices is first built in tiles of about that many, its tiles' borders waiting for a
+second phase over whole components. The units of a phase run on up to ``workers`` threads, the largest first, each
+thread taking the next unit when done (a CPU launch releases the GIL); they share no face or vertex they change and
+each writes its own node range, so the hierarchy is the same, bit for bit, on any number of threads.
 """
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -22,23 +25,24 @@ import numpy as np
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.launches import warp_view
-from lodprt.model.hierarchy import Hierarchy, leaf_layout
+from lodprt.model.hierarchy import Hierarchy
 from lodprt.model.hierarchy_build import BOUNDARY_WEIGHT, CONE_SLACK
 from lodprt.model.hierarchy_levels import mesh_groups
 from lodprt.model.hierarchy_rounds import EDGE_WEIGHT, FOLD_COS, MAX_VALENCE, SLIVER
 
-#: the groups are dealt into this many parts (fixed, so that the node order does not depend on the threads)
-PARTS = 2
 #: vertex ids are visited in blocks of this many, the blocks in a fixed permuted order (each block's memory is read
 #: together; no sweep crosses the mesh in id order, which would chain the El-Sana & Varshney dependencies)
 BLOCK = 1024
 #: a prime far from any block count (the stride of the blocks' permutation)
 STRIDE = 40503
+#: a connected component with more movable vertices than this is first built in tiles of about this many, on
+#: several threads, their borders waiting for a second phase over the whole component
+TILE = 20_000
 
 
 def _inputs(positions, faces, normals, component, target_base):
     """float64 positions, int32 faces without repeated corners, unit float64 normals, int32 groups (moves stay
-    within one) and connected components (parts are made of them)."""
+    within one) and connected components (the units)."""
     pos = np.ascontiguousarray(positions, np.float64)
     nrm = np.asarray(normals, np.float64)
     f = np.asarray(faces)
@@ -67,7 +71,7 @@ def _inputs(positions, faces, normals, component, target_base):
     return pos, f, nrm, group, pieces
 
 
-def _mesh(kh, pos, faces, group, keep_boundary):
+def _mesh(kh, kp, pos, faces, group, keep_boundary):
     """The kernels' Mesh, its corner lists, quadrics and flags made by ``prepare``."""
     wp = warp()
     V, F = len(pos), len(faces)
@@ -81,12 +85,11 @@ def _mesh(kh, pos, faces, group, keep_boundary):
     m.boundary, m.frozen = warp_view(np.zeros(V, np.uint8), wp.uint8), warp_view(np.zeros(V, np.uint8), wp.uint8)
     m.group = warp_view(group, wp.int32)
     G = int(group.max()) + 1 if V else 1
-    m.face_group = warp_view(group[faces[:, 0]], wp.int32)
+    m.face_group, m.count_group = warp_view(group[faces[:, 0]], wp.int32), warp_view(group, wp.int32)
     m.group_faces = warp_view(np.bincount(group[faces[:, 0]], minlength=G).astype(np.int32), wp.int32)
     m.quadric = warp_view(np.zeros((V, 10)), wp.float64)
-    s = _scratch(kh, V)
-    wp.launch(kh.prepare, dim=1, inputs=[m, s, BOUNDARY_WEIGHT], device="cpu")
-    return m, s
+    wp.launch(kp.prepare, dim=1, inputs=[m, _scratch(kh, V), BOUNDARY_WEIGHT], device="cpu")
+    return m
 
 
 def _scratch(kh, V):
@@ -97,10 +100,11 @@ def _scratch(kh, V):
     s.ring, s.rcnt = warp_view(np.zeros(2 * kh.CAP + 2, np.int32), wp.int32), warp_view(
         np.zeros(2 * kh.CAP + 2, np.int32), wp.int32)
     s.cost = warp_view(np.zeros(kh.CAP + 2), wp.float64)
+    s.stamp = warp_view(np.zeros(1, np.int32), wp.int32)
     return s
 
 
-def _queue(kh, V, nb_base):
+def _queue(kh, V):
     wp = warp()
     q = kh.Queue()
     nblocks = max(1, -(-V // BLOCK))
@@ -115,10 +119,14 @@ def _queue(kh, V, nb_base):
     q.count, q.cursor = warp_view(np.zeros(rows, np.int32), wp.int32), warp_view(np.zeros(rows, np.int32), wp.int32)
     q.row, q.ver = warp_view(np.full(V, -1, np.int32), wp.int32), warp_view(np.zeros(V, np.int32), wp.int32)
     q.bperm, q.binv, q.bsize = warp_view(perm, wp.int32), warp_view(inv, wp.int32), BLOCK
+    return q  # empty again after every unit (each launch runs until no entry is left): a thread reuses it
+
+
+def _counters(kh, nb_base):
+    """A unit's queue counters: both round parities empty, its neighbours recorded from ``nb_base``."""
     ctr = np.zeros(16, np.int64)
-    ctr[9], ctr[10], ctr[2] = kh.CLASSES, 2 * kh.CLASSES, nb_base  # both parities empty; neighbours from nb_base
-    q.ctr = warp_view(ctr, wp.int64)
-    return q
+    ctr[9], ctr[10], ctr[2] = kh.CLASSES, 2 * kh.CLASSES, nb_base
+    return ctr
 
 
 def _state(kh, V, normals):
@@ -135,14 +143,14 @@ def _state(kh, V, normals):
     return t
 
 
-def _nodes(kh, V, normals, most, neighbours):
-    """The node arrays sized for ``most`` collapses and ``neighbours`` recorded neighbours (numpy, Warp views)."""
+def _nodes(kh, V, normals, most):
+    """The node arrays sized for ``most`` collapses (numpy, and the kernels' Nodes viewing them; the recorded
+    neighbours are each phase's own)."""
     wp = warp()
     N = V + most
     arr = {"parent": np.full(N, -1, np.int32), "children": np.full((N, 2), -1, np.int32),
            "vertex": np.arange(N, dtype=np.int32), "axis": np.zeros((N, 3)), "half": np.zeros(N),
-           "radius": np.zeros(N), "error": np.zeros((N, 3)), "nb_count": np.zeros(N, np.int32),
-           "nbs": np.zeros(neighbours, np.int32)}
+           "radius": np.zeros(N), "error": np.zeros((N, 3)), "nb_count": np.zeros(N, np.int32)}
     arr["axis"][:V] = normals
     nd = kh.Nodes()
     types = {"axis": wp.vec3d, "error": wp.vec3d, "half": wp.float64, "radius": wp.float64}
@@ -151,105 +159,185 @@ def _nodes(kh, V, normals, most, neighbours):
     return nd, arr
 
 
-def _parts(pieces, movable, faces):
-    """(V,) part of each vertex (whole connected components, the largest first onto the lightest part: parts share
-    no face), the movable vertices and the neighbour entries each part may record at most (its valences capped at
-    MAX_VALENCE at collapse time)."""
-    G = int(pieces.max()) + 1 if len(pieces) else 1
-    size = np.bincount(pieces[movable], minlength=G)
-    owner = np.zeros(G, np.int32)
-    load = np.zeros(PARTS, np.int64)
-    for g in np.argsort(-size, kind="stable"):
-        owner[g] = int(np.argmin(load))
-        load[owner[g]] += size[g]
-    part = owner[pieces]
-    moves = np.bincount(part[movable], minlength=PARTS)
-    ring_entries = np.bincount(part[faces.ravel()], minlength=PARTS) * 2  # each corner adds two ring entries
-    return part, moves, moves * MAX_VALENCE + ring_entries
+def _sizes(vunit, funit, movable):
+    """Per unit: the collapses it may make and the neighbour entries it may record (each corner of its faces two,
+    plus MAX_VALENCE per collapse: a vertex's valence when it collapses is at most the larger)."""
+    U = int(max(vunit.max(initial=-1), funit.max(initial=-1))) + 1
+    moves = np.bincount(vunit[movable], minlength=U)
+    return moves, moves * MAX_VALENCE + np.bincount(funit, minlength=U) * 6
 
 
-def _compact(arr, V, node_base, made):
-    """Move each part's nodes down to follow the earlier parts' (creation = node id) and fix the references."""
-    at = V
-    for lo, n in zip(node_base, made):
-        shift = int(lo) - at
-        if shift:
-            for name in ("parent", "children"):
-                a = arr[name]
-                a[a >= lo] -= shift
-            for a in arr.values():
-                if a is not arr["nbs"]:
-                    a[at:at + n] = a[lo:lo + n]
+def _tiles(pos, faces, pieces, movable):
+    """The first phase's units when a connected component has more than ``TILE`` movable vertices, else None:
+    (F,) unit of each face (its component, or a cell of a grid over the component's two longest extents, by the
+    face's first corner) and (V,) unit of each vertex, -1 on the tiles' borders (faces in two units: they wait for the
+    second phase) and where no face is."""
+    size = np.bincount(pieces[movable], minlength=int(pieces.max(initial=0)) + 1)
+    big = np.flatnonzero(size > TILE)
+    if not len(big):
+        return None
+    funit = pieces[faces[:, 0]].astype(np.int64)
+    nxt = len(size)
+    for g in big:
+        sel = np.flatnonzero(funit == g)
+        c = pos[faces[sel, 0]]  # a face's first corner places it
+        lo, ext = c.min(0), np.ptp(c, axis=0)
+        ax = np.argsort(-ext)[:2]
+        k = -(-int(size[g]) // TILE)
+        a = int(np.ceil(np.sqrt(k)))
+        b = -(-k // a)
+        i = np.clip(((c[:, ax[0]] - lo[ax[0]]) / max(ext[ax[0]], 1e-300) * a).astype(np.int64), 0, a - 1)
+        j = np.clip(((c[:, ax[1]] - lo[ax[1]]) / max(ext[ax[1]], 1e-300) * b).astype(np.int64), 0, b - 1)
+        cell = i * b + j
+        funit[sel] = np.where(cell == 0, g, nxt + cell - 1)
+        nxt += a * b - 1
+    V = len(pos)
+    low, high = np.full(V, nxt, np.int64), np.full(V, -1, np.int64)
+    corner_unit = np.repeat(funit, 3)
+    np.minimum.at(low, faces.ravel(), corner_unit)
+    np.maximum.at(high, faces.ravel(), corner_unit)
+    vunit = np.where((high >= 0) & (low == high), high, -1)
+    return funit.astype(np.int32), vunit.astype(np.int32)
+
+
+def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers):
+    """One phase: a launch per unit of ``units`` ((V,) unit of each vertex, -1: it stays; (F,) unit of each face),
+    the largest first, on up to ``workers`` threads that each take the next unit when done; each unit stops at
+    ``target_base`` faces of ``counters`` ((V,) the counter of each vertex, (F,) of each face). Units share no face
+    or vertex they change, and each has its own node and neighbour range, so the result does not depend on the
+    threads. The nodes are compacted from node ``at``; returns the next free node, the recorded neighbours and the
+    most rounds of a unit."""
+    vunit, funit = units
+    wp = warp()
+    nd, arr = nd_arr
+    V = len(vunit)
+    alive = m.alive.numpy().astype(bool)
+    movable = m.movable.numpy().astype(bool) & (vunit >= 0) & (t.dead.numpy() == 0)  # what may yet collapse
+    moves, entries = _sizes(vunit, funit, movable)
+    todo = [int(u) for u in np.argsort(-moves, kind="stable") if moves[u]]
+    node_base = at + np.concatenate([[0], np.cumsum(moves)[:-1]]).astype(np.int64)
+    nb_base = np.concatenate([[0], np.cumsum(entries)[:-1]]).astype(np.int64)
+    nd.nbs = warp_view(np.zeros(int(entries.sum()), np.int32), wp.int32)
+    vcount, fcount = counters
+    m.count_group, m.face_group = warp_view(np.maximum(vcount, 0), wp.int32), warp_view(fcount, wp.int32)
+    m.group_faces = warp_view(np.bincount(fcount[alive], minlength=int(fcount.max(initial=0)) + 1).astype(np.int32),
+                              wp.int32)
+    unit_wp = warp_view(vunit, wp.int32)
+    for a in (t.used, t.wait_v, t.wait_vr, t.wait_u, t.wait_ur):  # rounds count from 0 again
+        a.numpy().fill(-1)
+    ctrs = {u: _counters(kh, nb_base[u]) for u in todo}
+
+    def launch(s, q, u):
+        q.ctr = warp_view(ctrs[u], wp.int64)
+        wp.launch(kh.greedy_build, dim=1, device="cpu", inputs=[m, s, q, t, nd, unit_wp, u, int(node_base[u]),
+                                                                int(target_base), EDGE_WEIGHT, FOLD_COS, SLIVER,
+                                                                MAX_VALENCE])
+
+    _run(lambda: (_scratch(kh, V), _queue(kh, V)), launch, todo, workers)
+    if any(c[5] for c in ctrs.values()):
+        raise LodprtError("build_greedy: neighbour space exhausted (an internal sizing error)")
+    nbs = nd.nbs.numpy()
+    order = sorted(todo)
+    recorded = [nbs[nb_base[u]:int(ctrs[u][2])] for u in order]
+    at = _compact(arr, t.node_of.numpy(), at, node_base[order], [int(ctrs[u][1]) for u in order])
+    return at, recorded, max((int(c[8]) for c in ctrs.values()), default=0)
+
+
+def _compact(arr, node_of, at, node_base, made):
+    """Move each unit's nodes (from ``node_base``, ``made`` of them, in increasing order) down to follow the earlier
+    units' (creation = node id) and fix the references to them (parents, children, the node at each vertex)."""
+    new_id = np.arange(len(arr["parent"]), dtype=np.int32)
+    for src, n in zip(node_base, made):
+        new_id[src:src + n] = np.arange(at, at + n, dtype=np.int32)
+        for a in arr.values():
+            if src != at:
+                a[at:at + n] = a[src:src + n]
         at += n
+    for a in (arr["parent"], arr["children"], node_of):
+        live = a >= 0
+        a[live] = new_id[a[live]]
     return at
 
 
 def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, *, component=None,
                  target_base: int = 64, keep_boundary: bool = False, workers: int | None = None) -> Hierarchy:
     """The vertex hierarchy of a triangle mesh built in sequence (module docstring): the arguments and the result
-    of ``lodprt.model.hierarchy_build.build_hierarchy`` (no progress reports: one launch per part). A vertex with
+    of ``lodprt.model.hierarchy_build.build_hierarchy`` (no progress reports: one launch per unit). A vertex with
     more than ``CAP`` (128) neighbours takes part in no collapse. Raises LodprtError naming the bad input."""
     from lodprt.devices import load_kernels
     from lodprt.kernels import hierarchy_greedy as kh
+    from lodprt.kernels import hierarchy_prepare as kp
 
     t0 = time.perf_counter()
-    wp = warp()
     pos, work, nrm, group, pieces = _inputs(positions, faces, normals, component, target_base)
     V = len(pos)
-    load_kernels("cpu", kh)
-    m, s0 = _mesh(kh, pos, work, group, keep_boundary)
-    part, moves, entries = _parts(pieces, m.movable.numpy().astype(bool), work)
-    node_base = V + np.concatenate([[0], np.cumsum(moves)[:-1]]).astype(np.int64)
-    nb_base = np.concatenate([[0], np.cumsum(entries)[:-1]]).astype(np.int64)
+    load_kernels("cpu", kh, kp)
+    m = _mesh(kh, kp, pos, work, group, keep_boundary)
     t = _state(kh, V, nrm)
-    nd, arr = _nodes(kh, V, nrm, int(moves.sum()), int(entries.sum()))
-    part_wp = warp_view(part.astype(np.int32), wp.int32)
-    launches = []
-    for p in range(PARTS):
-        s = s0 if p == 0 else _scratch(kh, 0)
-        if p:  # seen / slot are per vertex and the parts share no vertex: one set for all
-            s.seen, s.slot, s.seen2, s.slot2 = s0.seen, s0.slot, s0.seen2, s0.slot2
-        q = _queue(kh, V, nb_base[p])
-        launches.append((q, [m, s, q, t, nd, part_wp, p, int(node_base[p]), int(target_base), EDGE_WEIGHT,
-                             FOLD_COS, SLIVER, MAX_VALENCE]))
-    _run(wp, kh.greedy_build, [a for _, a in launches], workers)
-    ctrs = [q.ctr.numpy() for q, _ in launches]
-    if any(c[5] for c in ctrs):
-        raise LodprtError("build_greedy: neighbour space exhausted (an internal sizing error)")
-    made = [int(c[1]) for c in ctrs]
-    N = _compact(arr, V, node_base, made)
-    nbs = np.concatenate([arr["nbs"][nb_base[p]:int(ctrs[p][2])] for p in range(PARTS)])
-    return _hierarchy(arr, N, V, nbs, max(int(c[8]) for c in ctrs), time.perf_counter() - t0)
+    movable = m.movable.numpy().astype(bool)
+    nd_arr = _nodes(kh, V, nrm, int(movable.sum()))
+    tiles = _tiles(pos, work, pieces, movable)
+    whole = (pieces.astype(np.int32), pieces[work[:, 0]].astype(np.int32))
+    phases = [(whole, (group, group[work[:, 0]]))]
+    if tiles is not None:  # tiles first (each its own counter), their borders waiting; then whole components
+        phases.insert(0, ((tiles[1], tiles[0]), (tiles[1], tiles[0])))
+    at, recorded, rounds = V, [], 0
+    for units, counters in phases:
+        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers)
+        recorded += rec
+        rounds += r
+    h = _hierarchy(kp, nd_arr[1], at, V, np.concatenate(recorded), rounds)
+    h.build_seconds = time.perf_counter() - t0
+    return h
 
 
-def _run(wp, kernel, inputs, workers):
-    """One launch per part, up to ``workers`` at once (default: one thread per part)."""
-    at_once = len(inputs) if workers is None else max(1, min(int(workers), len(inputs)))
+def _run(make, launch, todo, workers):
+    """``launch(*make(), unit)`` for every unit of ``todo``, in order, on up to ``workers`` threads (default: every
+    core this process may use; a CPU launch releases the GIL), each with its own ``make()`` (scratch, queue)."""
+    if workers is None:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    left = list(todo)
+    lock = threading.Lock()
+    failed = []
 
-    def go(batch):
-        for args in batch:
-            wp.launch(kernel, dim=1, inputs=args, device="cpu")
+    def work():
+        own = make()
+        while True:
+            with lock:
+                if not left or failed:
+                    return
+                u = left.pop(0)
+            try:
+                launch(*own, u)
+            except BaseException as e:  # noqa: BLE001 (re-raised in the calling thread)
+                failed.append(e)
+                return
 
-    batches = [inputs[i::at_once] for i in range(at_once)]
-    threads = [threading.Thread(target=go, args=(b,)) for b in batches[1:]]
+    threads = [threading.Thread(target=work) for _ in range(max(1, min(int(workers), len(left))) - 1)]
     for th in threads:
         th.start()
-    go(batches[0])
+    work()
     for th in threads:
         th.join()
+    if failed:
+        raise failed[0]
 
 
-def _hierarchy(arr, N, V, nbs, rounds, seconds) -> Hierarchy:
+def _hierarchy(kp, arr, N, V, nbs, rounds) -> Hierarchy:
+    """The ``Hierarchy`` of the first N nodes (the leaf layout by ``leaf_layout``: children precede parents)."""
     offsets = np.zeros(N + 1, np.int64)
     np.cumsum(arr["nb_count"][:N], out=offsets[1:])
     parent, children = arr["parent"][:N], arr["children"][:N]
     half = np.minimum(arr["half"][:N] + CONE_SLACK, np.pi).astype(np.float32)
     half[:V] = 0
-    leaf_order, leaf_range = leaf_layout(parent, children, V)
-    h = Hierarchy(num_vertices=V, parent=parent, children=children, vertex=arr["vertex"][:N],
-                  creation=np.arange(N, dtype=np.int32), cone_axis=arr["axis"][:N].astype(np.float32),
-                  cone_half_angle=half, radius=(arr["radius"][:N] * (1 + 1e-6)).astype(np.float32),
-                  error_vector=arr["error"][:N].astype(np.float32), neighbour_offsets=offsets,
-                  neighbours=nbs.astype(np.int32, copy=False), leaf_order=leaf_order, leaf_range=leaf_range,
-                  levels=rounds, build_seconds=seconds, method="greedy")
-    return h
+    leaf_order, leaf_range = np.zeros(V, np.int32), np.zeros((N, 2), np.int64)
+    wp = warp()
+    wp.launch(kp.leaf_layout, dim=1, inputs=[warp_view(parent, wp.int32), warp_view(children, wp.int32),
+                                             warp_view(leaf_range, wp.int64), warp_view(leaf_order, wp.int32)],
+              device="cpu")
+    return Hierarchy(num_vertices=V, parent=parent, children=children, vertex=arr["vertex"][:N],
+                     creation=np.arange(N, dtype=np.int32), cone_axis=arr["axis"][:N].astype(np.float32),
+                     cone_half_angle=half, radius=(arr["radius"][:N] * (1 + 1e-6)).astype(np.float32),
+                     error_vector=arr["error"][:N].astype(np.float32), neighbour_offsets=offsets,
+                     neighbours=nbs.astype(np.int32, copy=False), leaf_order=leaf_order, leaf_range=leaf_range,
+                     levels=rounds, method="greedy")
