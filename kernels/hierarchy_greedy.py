@@ -1,19 +1,21 @@
-"""Hierarchy build in sequence (SPEC 3; thesis 3.2, figures 5, 6, 7 and 10; tag H-G), float64 Warp kernels, one
-thread each: the whole build of a set of mesh groups in one launch.
+"""Hierarchy build in sequence (SPEC 3; thesis 3.2, figures 5, 6, 7 and 10; tag H-G), float64 Warp kernels: one
+thread builds one unit of the mesh in one launch.
 
-The host (``lodprt.model.hierarchy_greedy``) splits the mesh into units (components, or tiles whose borders wait),
-prepares the mesh (``lodprt.kernels.hierarchy_prepare``), launches ``greedy_build`` once per unit (from several threads, each with its own scratch and queue: units share no
-vertex or face they change, nor a node id) and compacts the node ids.
+The host (``lodprt.model.hierarchy_greedy``) prepares the mesh (``lodprt.kernels.hierarchy_prepare``), splits it
+into units (components, or tiles whose borders wait for a later phase), launches ``greedy_build`` once per unit from
+several threads, each with its own scratch and queue (units share no vertex or face they change, nor a node id),
+and compacts the node ids.
 
 * ``greedy_build``: rounds of half-edge collapses made one at a time on the mesh as it stands (rule H-G,
   docs/HIERARCHY.md). A queue of proposals keyed by (round, cost class, position: blocks of ``bsize`` vertex ids
   visited in a fixed permuted order) hands out the cheapest proposal of the round; a collapse makes its two
-  endpoints wait for the next round (one collapse per vertex and round: the depth is at most the rounds) and marks
-  the survivor's new ring for a fresh evaluation (the QEM cost of ``u``'s position under ``Q_v + Q_u`` plus
-  ``edge_weight |uv|^4``, the legality of figure 6 and the link condition, read on the current mesh).
+  endpoints wait for the next round (one collapse per vertex and round: the depth is at most the rounds), a waiting
+  proposal holds costlier ones around it back, and the survivor's new ring is marked for a fresh evaluation (the
+  QEM cost of ``u``'s position under ``Q_v + Q_u`` plus ``edge_weight |uv|^4``, the legality of figure 6 and the
+  link condition, read on the current mesh).
 
 Loops are bounded by the arrays: a ring holds at most ``CAP`` vertices (a vertex with more takes no part), classes
-are clamped into the queue's rows, node and neighbour writes stay in the part's ranges (sized for every collapse).
+are clamped into the queue's rows, node and neighbour writes stay in the unit's ranges (sized for every collapse).
 """
 
 import warp as wp
