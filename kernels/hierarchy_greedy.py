@@ -76,7 +76,7 @@ class Queue:
 
 
 # ctr: 0 unused, 1 collapses made, 2 neighbour entries written, 3 evaluations, 4 entries handed out, 5 overflow,
-# 7 scan row, 8 round, 9 + p lowest row of parity p, 11 + p entries of parity p
+# 7 scan row, 8 round, 9 + p lowest row of parity p, 11 + p entries of parity p, 13 end of the neighbour range
 
 
 @wp.struct
@@ -336,8 +336,8 @@ def record(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, v: int, u: int, n
     nd.vertex[k] = u
     t.node_of[u] = k
     off = int(q.ctr[2])
-    if off + nv > nd.nbs.shape[0]:
-        q.ctr[5] = wp.int64(1)  # out of neighbour space: the host raises
+    if off + nv > wp.min(int(q.ctr[13]), nd.nbs.shape[0]):
+        q.ctr[5] = wp.int64(1)  # out of this unit's neighbour range: the host raises
         return k
     for i in range(nv):  # insertion sort into place
         w = s.ring[i]

@@ -164,3 +164,16 @@ def test_tiles_then_their_borders_stay_legal(monkeypatch):
     for name in one.ARRAYS:
         np.testing.assert_array_equal(getattr(one, name), getattr(two, name), err_msg=name)
     assert abs(len(two.roots) - len(whole.roots)) <= 6, (len(two.roots), len(whole.roots))
+
+
+@pytest.mark.warp_debug
+def test_a_unit_out_of_neighbour_room_stops_with_a_clear_error(monkeypatch):
+    """Each unit records neighbours in its own range; were the host's sizing ever short, the kernel writes nothing
+    past it (a neighbour of another unit, or past the array) and the build raises."""
+    import lodprt.model.hierarchy_greedy as hg
+
+    sizes = hg._sizes
+    monkeypatch.setattr(hg, "_sizes", lambda *a: (lambda m, e: (m, e // 50))(*sizes(*a)))
+    pos, faces = two_grids()
+    with pytest.raises(LodprtError, match="neighbour"):
+        greedy(pos, faces)

@@ -122,10 +122,11 @@ def _queue(kh, V):
     return q  # empty again after every unit (each launch runs until no entry is left): a thread reuses it
 
 
-def _counters(kh, nb_base):
-    """A unit's queue counters: both round parities empty, its neighbours recorded from ``nb_base``."""
+def _counters(kh, nb_base, nb_count):
+    """A unit's queue counters: both round parities empty, its neighbours recorded in ``nb_count`` entries from
+    ``nb_base``."""
     ctr = np.zeros(16, np.int64)
-    ctr[9], ctr[10], ctr[2] = kh.CLASSES, 2 * kh.CLASSES, nb_base
+    ctr[9], ctr[10], ctr[2], ctr[13] = kh.CLASSES, 2 * kh.CLASSES, nb_base, nb_base + nb_count
     return ctr
 
 
@@ -225,7 +226,7 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers):
     unit_wp = warp_view(vunit, wp.int32)
     for a in (t.used, t.wait_v, t.wait_vr, t.wait_u, t.wait_ur):  # rounds count from 0 again
         a.numpy().fill(-1)
-    ctrs = {u: _counters(kh, nb_base[u]) for u in todo}
+    ctrs = {u: _counters(kh, nb_base[u], entries[u]) for u in todo}
 
     def launch(s, q, u):
         q.ctr = warp_view(ctrs[u], wp.int64)
