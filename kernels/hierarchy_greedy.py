@@ -88,7 +88,8 @@ class State:
     checked: wp.array(dtype=wp.uint8)  # (V,) 1 when that proposal was legal at evalt
     evalt: wp.array(dtype=wp.int32)  # (V,) collapses made when it was evaluated
     modt: wp.array(dtype=wp.int32)  # (V,) collapses made when its ring last changed
-    used: wp.array(dtype=wp.int32)  # (V,) the last round it was an endpoint of a collapse (-1: none)
+    used: wp.array(dtype=wp.int32)  # (V,) the last round a collapse made it unable to collapse (-1: none) ...
+    used_u: wp.array(dtype=wp.int32)  # (V,) ... or to take a collapse (rule H-G, below)
     wait_v: wp.array(dtype=wp.int32)  # (V,) class of its proposal that waits for the next round (-1: none) ...
     wait_vr: wp.array(dtype=wp.int32)  # (V,) ... in this round
     wait_u: wp.array(dtype=wp.int32)  # (V,) cheapest class of the waiting proposals into it ...
@@ -365,6 +366,8 @@ def collapse(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, part: wp.array(
     """Make v -> u: its node, the faces (those on uv vanish, the others move to u), Q_u += Q_v, the error vector
     (figure 10), and the survivor's new ring marked for evaluation. Returns the stamp last used."""
     k = record(m, s, q, t, nd, v, u, nv, node_base)
+    for i in range(nv):  # v's ring takes no other collapse this round (rule H-R's u' in N[v])
+        t.used_u[s.ring[i]] = rnd
     c = m.head[v]
     while c >= 0:
         f = c // 3
@@ -409,6 +412,7 @@ def collapse(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, part: wp.array(
         if part[w] != me:
             continue  # a tile's border vertex: read only until the phase that owns it
         t.modt[w] = int(q.ctr[1])
+        t.used[w] = rnd  # no vertex of the survivor's closed ring collapses this round (H-R's v' in N[v] or N[u])
         if m.movable[w] != wp.uint8(0) and t.dead[w] == wp.uint8(0) and t.pending[w] == wp.uint8(0):
             t.pending[w] = wp.uint8(1)
             t.version[w] = t.version[w] + 1
@@ -484,7 +488,7 @@ def greedy_build(
         c = r % CLASSES
         if t.pending[v] != wp.uint8(0):
             u = -1
-        if t.used[v] == rnd or (u >= 0 and t.used[u] == rnd):
+        if t.used[v] == rnd or (u >= 0 and t.used_u[u] == rnd):
             wait(q, t, v, u, c, ver, rnd)  # an endpoint of this round's collapses: the next round
             continue
         st += 1

@@ -137,7 +137,7 @@ def _state(kh, V, normals):
         setattr(t, name, warp_view(np.zeros(V, np.int32), wp.int32))
     t.pending, t.dead, t.checked = (warp_view(np.zeros(V, np.uint8), wp.uint8) for _ in range(3))
     t.lastcost, t.half, t.radius = (warp_view(np.zeros(V), wp.float64) for _ in range(3))
-    for name in ("used", "wait_v", "wait_vr", "wait_u", "wait_ur"):
+    for name in ("used", "used_u", "wait_v", "wait_vr", "wait_u", "wait_ur"):
         setattr(t, name, warp_view(np.full(V, -1, np.int32), wp.int32))
     t.node_of = warp_view(np.arange(V, dtype=np.int32), wp.int32)
     t.axis = warp_view(normals.copy(), wp.vec3d)
@@ -224,7 +224,7 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers):
     m.group_faces = warp_view(np.bincount(fcount[alive], minlength=int(fcount.max(initial=0)) + 1).astype(np.int32),
                               wp.int32)
     unit_wp = warp_view(vunit, wp.int32)
-    for a in (t.used, t.wait_v, t.wait_vr, t.wait_u, t.wait_ur):  # rounds count from 0 again
+    for a in (t.used, t.used_u, t.wait_v, t.wait_vr, t.wait_u, t.wait_ur):  # rounds count from 0 again
         a.numpy().fill(-1)
     ctrs = {u: _counters(kh, nb_base[u], entries[u]) for u in todo}
 
