@@ -8,9 +8,10 @@ and compacts the node ids.
 
 * ``greedy_build``: rounds of half-edge collapses made one at a time on the mesh as it stands (rule H-G,
   docs/HIERARCHY.md). A queue of proposals keyed by (round, cost class, position: blocks of ``bsize`` vertex ids
-  visited in a fixed permuted order) hands out the cheapest proposal of the round; a collapse makes its two
-  endpoints wait for the next round (one collapse per vertex and round: the depth is at most the rounds), a waiting
-  proposal holds costlier ones around it back, and the survivor's new ring is marked for a fresh evaluation (the
+  visited in a fixed permuted order) hands out the cheapest proposal of the round; a collapse keeps the survivor's
+  closed ring from collapsing and ``v``'s ring from taking a collapse until the next round (rule H-R's conflicts:
+  at most one collapse per vertex and round, so the depth is at most the rounds), a waiting proposal holds
+  costlier ones around it back, and the survivor's new ring is marked for a fresh evaluation (the
   QEM cost of ``u``'s position under ``Q_v + Q_u`` plus ``edge_weight |uv|^4``, the legality of figure 6 and the
   link condition, read on the current mesh).
 
