@@ -177,3 +177,21 @@ def test_a_unit_out_of_neighbour_room_stops_with_a_clear_error(monkeypatch):
     pos, faces = two_grids()
     with pytest.raises(LodprtError, match="neighbour"):
         greedy(pos, faces)
+
+
+def test_a_bake_with_it_stores_it_whole(tmp_path):
+    """``bake(scene, path, tree=build_greedy(...))`` stores the sequential build's arrays unchanged, with its method and
+    rounds, and its light cuts keep fewer vertices than the full mesh (the documented way to use it today)."""
+    from lodprt.model.scene import THESIS_MATERIAL, assemble_scene
+    from lodprt.precompute.bake import bake
+    from lodprt.store.bake_store import open_store
+
+    pos, faces = wavy_grid(24)
+    scene = assemble_scene([("grid", pos, faces, THESIS_MATERIAL)], None, {}, "lights", "grid")
+    h = build_greedy(scene.positions, scene.faces, scene.normals)
+    res = bake(scene, tmp_path / "s.zarr", sh_order=2, threshold_deg=30.0, tree=h)
+    stored = open_store(tmp_path / "s.zarr").hierarchy()
+    assert stored.method == "greedy" and stored.levels == h.levels
+    for name in h.ARRAYS:
+        np.testing.assert_array_equal(getattr(stored, name), getattr(h, name), err_msg=name)
+    assert 0 < min(s["vertices_kept"] for s in res.samples) < scene.num_vertices
