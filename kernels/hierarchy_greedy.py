@@ -76,7 +76,7 @@ class Queue:
     ctr: wp.array(dtype=wp.int64)  # (16,) counters, below
 
 
-# ctr: 0 unused, 1 collapses made, 2 neighbour entries written, 3 evaluations, 4 entries handed out, 5 overflow,
+# ctr: 1 collapses made, 2 neighbour entries written, 5 overflow (0, 3, 4, 6 unused),
 # 7 scan row, 8 round, 9 + p lowest row of parity p, 11 + p entries of parity p, 13 end of the neighbour range
 
 
@@ -85,8 +85,7 @@ class State:
     version: wp.array(dtype=wp.int32)  # (V,) bumped at every evaluation and mark
     pending: wp.array(dtype=wp.uint8)  # (V,) 1 while the vertex's proposal waits for an evaluation
     lastcost: wp.array(dtype=wp.float64)  # (V,) cost of its last proposal
-    target: wp.array(dtype=wp.int32)  # (V,) its last proposal's u
-    checked: wp.array(dtype=wp.uint8)  # (V,) 1 when that proposal was legal at evalt
+    target: wp.array(dtype=wp.int32)  # (V,) its last proposal's u (legal when it was evaluated)
     evalt: wp.array(dtype=wp.int32)  # (V,) collapses made when it was evaluated
     modt: wp.array(dtype=wp.int32)  # (V,) collapses made when its ring last changed
     used: wp.array(dtype=wp.int32)  # (V,) the last round a collapse made it unable to collapse (-1: none) ...
@@ -289,7 +288,6 @@ def evaluate(m: Mesh, s: Scratch, q: Queue, t: State, part: wp.array(dtype=wp.in
     t.pending[v] = wp.uint8(0)
     t.evalt[v] = int(q.ctr[1])
     t.version[v] = t.version[v] + 1
-    q.ctr[3] = q.ctr[3] + wp.int64(1)
     pv = vec_at(m.pos, v)
     need = 2 - int(m.boundary[v])  # a boundary vertex moves along a boundary edge (one face) only
     left = int(0)
@@ -316,7 +314,6 @@ def evaluate(m: Mesh, s: Scratch, q: Queue, t: State, part: wp.array(dtype=wp.in
         if legal(m, s, v, s.ring[at], nv, s.rcnt[at], st, fold_cos, sliver, max_valence):
             t.target[v] = s.ring[at]
             t.lastcost[v] = low
-            t.checked[v] = wp.uint8(1)
             push(q, low, v, t.version[v], 0)
             return st
         s.cost[at] = NONE
@@ -368,7 +365,8 @@ def collapse(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, part: wp.array(
     (figure 10), and the survivor's new ring marked for evaluation. Returns the stamp last used."""
     k = record(m, s, q, t, nd, v, u, nv, node_base)
     for i in range(nv):  # v's ring takes no other collapse this round (rule H-R's u' in N[v])
-        t.used_u[s.ring[i]] = rnd
+        if part[s.ring[i]] == me:  # a tile's border vertex belongs to a later phase (and another thread reads it)
+            t.used_u[s.ring[i]] = rnd
     c = m.head[v]
     while c >= 0:
         f = c // 3
@@ -418,7 +416,6 @@ def collapse(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, part: wp.array(
             t.pending[w] = wp.uint8(1)
             t.version[w] = t.version[w] + 1
             push(q, t.lastcost[w], w, t.version[w], 0)
-    t.used[u] = rnd
     return st
 
 
@@ -456,7 +453,7 @@ def greedy_build(
     m: Mesh,  # In/Out: the mesh, collapsed in place
     s: Scratch,  # Temp: this thread's rings
     q: Queue,  # Temp: this thread's queue (empty again at the end); q.ctr this unit's counters
-    t: State,  # Temp: per-vertex state (parts share no vertex)
+    t: State,  # Temp: per-vertex state (units share no vertex they change)
     nd: Nodes,  # Out: nodes node_base.. of this unit, its neighbours from q.ctr[2]
     part: wp.array(dtype=wp.int32),  # In: (V,) the unit of each vertex (-1: it waits for a later phase)
     me: int,  # In: this launch's unit
@@ -482,7 +479,6 @@ def greedy_build(
         q.row[v] = -1
         ver = q.ver[v]
         rnd = int(q.ctr[8])
-        q.ctr[4] = q.ctr[4] + wp.int64(1)
         if t.dead[v] != wp.uint8(0) or ver != t.version[v] or m.group_faces[m.count_group[v]] <= target_base:
             continue
         u = t.target[v]
@@ -490,7 +486,7 @@ def greedy_build(
         if t.pending[v] != wp.uint8(0):
             u = -1
         if t.used[v] == rnd or (u >= 0 and t.used_u[u] == rnd):
-            wait(q, t, v, u, c, ver, rnd)  # an endpoint of this round's collapses: the next round
+            wait(q, t, v, u, c, ver, rnd)  # blocked by this round's collapses (rule H-G): the next round
             continue
         st += 1
         nv = gather(m, v, st, s.seen, s.slot, s.ring, s.rcnt, 0)
@@ -504,9 +500,8 @@ def greedy_build(
             i = s.slot[u]
             st += 1
             if s.seen[u] == st - 1 and t.dead[u] == wp.uint8(0):
-                same = t.checked[v] != wp.uint8(0) and t.modt[u] <= t.evalt[v] and t.modt[v] <= t.evalt[v]
+                same = t.modt[u] <= t.evalt[v] and t.modt[v] <= t.evalt[v]  # legal at evalt, nothing moved since
                 if same or legal(m, s, v, u, nv, s.rcnt[i], st, fold_cos, sliver, max_valence):
-                    t.used[v] = rnd
                     st = collapse(m, s, q, t, nd, part, me, v, u, nv, st, node_base, rnd)
                     continue
         st = evaluate(m, s, q, t, part, me, v, nv, st, edge_weight, fold_cos, sliver, max_valence)

@@ -135,7 +135,7 @@ def _state(kh, V, normals):
     t = kh.State()
     for name in ("version", "target", "evalt", "modt"):
         setattr(t, name, warp_view(np.zeros(V, np.int32), wp.int32))
-    t.pending, t.dead, t.checked = (warp_view(np.zeros(V, np.uint8), wp.uint8) for _ in range(3))
+    t.pending, t.dead = (warp_view(np.zeros(V, np.uint8), wp.uint8) for _ in range(2))
     t.lastcost, t.half, t.radius = (warp_view(np.zeros(V), wp.float64) for _ in range(3))
     for name in ("used", "used_u", "wait_v", "wait_vr", "wait_u", "wait_ur"):
         setattr(t, name, warp_view(np.full(V, -1, np.int32), wp.int32))
