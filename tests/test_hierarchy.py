@@ -17,15 +17,19 @@ def scene(bunny_floor):
     return bunny_floor
 
 
-@pytest.fixture(scope="module")
-def hier(bunny_hierarchy):
-    return bunny_hierarchy
+@pytest.fixture(scope="module", params=["sequential", "rounds"])
+def hier(request, bunny_hierarchy, bunny_floor):
+    """The bunny + floor hierarchy of each build (the default, sequential one is the session's)."""
+    if request.param == "sequential":
+        return bunny_hierarchy
+    s = bunny_floor
+    return build_hierarchy(s.positions, s.faces, s.normals, method=request.param)
 
 
-def build(pos, faces):
+def build(pos, faces, method="sequential"):
     pos = np.asarray(pos, float)
     faces = np.asarray(faces)
-    return build_hierarchy(pos, faces, vertex_normals(pos, faces))
+    return build_hierarchy(pos, faces, vertex_normals(pos, faces), method=method)
 
 
 def face_normals(pos, tri):
@@ -403,12 +407,13 @@ def replay_collapses(pos, faces, h, *, error_vectors=True):
         assert best - slack - 1e-6 <= e <= best + 1e-6
 
 
-def test_creation_order_is_a_legal_sequence_of_collapses():
-    """Replayed one by one in creation order on a plain Python mesh, every collapse of the round-parallel build is
-    a legal half-edge collapse of the mesh as it stands then (``replay_collapses``; the default build collapses
-    the rim)."""
+@pytest.mark.parametrize("method", ["sequential", "rounds"])
+def test_creation_order_is_a_legal_sequence_of_collapses(method):
+    """Replayed one by one in creation order on a plain Python mesh, every collapse of each build is a legal
+    half-edge collapse of the mesh as it stands then (``replay_collapses``; by default the builds collapse the
+    rim)."""
     pos, faces = wavy_grid(24)
-    replay_collapses(pos, faces, build(pos, faces))
+    replay_collapses(pos, faces, build(pos, faces, method))
 
 
 def flat_grid(n, tilt=0.0):
@@ -475,9 +480,9 @@ def test_every_round_is_pairwise_non_conflicting(monkeypatch):
         return v, u
 
     monkeypatch.setattr(CollapseRounds, "select", recording)
-    build(*wavy_grid(30))
+    build(*wavy_grid(30), method="rounds")
     pos, faces, normals, _ = flat_grid(41)
-    build_hierarchy(pos, faces, normals)
+    build_hierarchy(pos, faces, normals, method="rounds")
     assert len(rounds) > 20
     for v, u, start, end, dst in rounds:
         assert len(np.unique(np.r_[v, u])) == 2 * len(v)
@@ -491,15 +496,16 @@ def test_every_round_is_pairwise_non_conflicting(monkeypatch):
         assert (in_ring_u[v] == 1).all()  # each v only in its own u's ring
 
 
-def test_components_are_built_independently():
+@pytest.mark.parametrize("method", ["sequential", "rounds"])
+def test_components_are_built_independently(method):
     """Two disconnected meshes built together give each the same collapses (in the same order, with the same
     cones, radii and error vectors) as building it alone: no collapse, choice or stopping rule crosses a
     component."""
     pa, fa = wavy_grid(20, seed=1)
     pb, fb = wavy_grid(14, lift=5.0, seed=2)
-    both = build(np.r_[pa, pb], np.r_[fa, fb + len(pa)])
+    both = build(np.r_[pa, pb], np.r_[fa, fb + len(pa)], method)
     for p, f, lo in ((pa, fa, 0), (pb, fb, len(pa))):
-        alone = build(p, f)
+        alone = build(p, f, method)
         V = len(p)
         internal = np.arange(len(pa) + len(pb), both.num_nodes)
         mine = internal[(both.vertex[internal] >= lo) & (both.vertex[internal] < lo + V)]
@@ -541,6 +547,7 @@ def test_leaf_layout_and_heights_match_a_python_walk(hier):
 
 
 MEMORY_CHILD = """
+import sys
 import numpy as np
 from lodprt.model.hierarchy_build import build_hierarchy
 from lodprt.model.scene import vertex_normals
@@ -556,22 +563,24 @@ def grid(n):
 def status(key):  # VmRSS now, VmHWM the peak of this process image (ru_maxrss would include the forked parent's)
     return int(open("/proc/self/status").read().split(key + ":")[1].split()[0]) * 1024
 
-build_hierarchy(*grid(10))  # first-use allocations (scipy, caches) before measuring
+method = sys.argv[1]
+build_hierarchy(*grid(10), method=method)  # first-use allocations (scipy, caches, kernels) before measuring
 pos, faces, normals = grid(300)
 before, peak_before = status("VmRSS"), status("VmHWM")
-h = build_hierarchy(pos, faces, normals)
+h = build_hierarchy(pos, faces, normals, method=method)
 peak = status("VmHWM")
 print(len(pos), before, peak_before, peak, h.num_nodes)
 """
 
 
-def test_build_memory_per_vertex_bounded():
+@pytest.mark.parametrize("method", ["sequential", "rounds"])
+def test_build_memory_per_vertex_bounded(method):
     """Building a 90,000-vertex mesh in a fresh process raises its peak resident memory by under 1 KB per vertex
     (issue 14; the hierarchy itself keeps about 170 B per vertex)."""
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-c", MEMORY_CHILD], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", MEMORY_CHILD, method], capture_output=True, text=True, check=True).stdout
     V, before, peak_before, peak, nodes = map(int, out.split())
     assert peak > peak_before  # the build set the peak: the measurement is about it
     assert nodes > 1.8 * V

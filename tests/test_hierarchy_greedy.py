@@ -35,7 +35,7 @@ def test_every_collapse_is_legal_on_the_mesh_as_it_stands(mesh):
     h = greedy(pos, faces)
     replay_collapses(pos, faces, h)
     check_forest(h, len(pos), np.isin(np.arange(len(pos)), faces))
-    assert h.method == "greedy" and h.num_nodes > len(pos)
+    assert h.method == "sequential" and h.num_nodes > len(pos)
 
 
 def test_one_collapse_per_vertex_and_round():
@@ -108,7 +108,7 @@ def test_awkward_meshes_build_and_non_manifold_vertices_stay():
 
 
 @pytest.mark.warp_debug
-def test_bunny_floor_attributes_and_base_match_the_rounds_build(bunny_floor, bunny_hierarchy):
+def test_bunny_floor_attributes_and_base_match_the_rounds_build(bunny_floor):
     """On the bunny and its floor: a forest of half-edge collapses, every leaf normal inside its ancestors' cones,
     every radius holding its leaves (a sample of nodes), zero error vectors on the flat floor and not on the
     bunny, and a base within 5% (or 8 roots) of the rounds build's."""
@@ -123,7 +123,7 @@ def test_bunny_floor_attributes_and_base_match_the_rounds_build(bunny_floor, bun
     on_floor = s.object_id[h.vertex[internal]] == s.object_id[-1]
     err = np.linalg.norm(h.error_vector[internal], axis=1)
     assert err[on_floor].max() < 1e-6 and err[~on_floor].max() > 1e-5
-    rounds = build_hierarchy(s.positions, s.faces, s.normals, component=s.object_id)
+    rounds = build_hierarchy(s.positions, s.faces, s.normals, component=s.object_id, method="rounds")
     assert abs(len(h.roots) - len(rounds.roots)) <= max(0.05 * len(rounds.roots), 8)
 
 
@@ -191,7 +191,7 @@ def test_a_bake_with_it_stores_it_whole(tmp_path):
     h = build_greedy(scene.positions, scene.faces, scene.normals)
     res = bake(scene, tmp_path / "s.zarr", sh_order=2, threshold_deg=30.0, tree=h)
     stored = open_store(tmp_path / "s.zarr").hierarchy()
-    assert stored.method == "greedy" and stored.levels == h.levels
+    assert stored.method == "sequential" and stored.levels == h.levels
     for name in h.ARRAYS:
         np.testing.assert_array_equal(getattr(stored, name), getattr(h, name), err_msg=name)
     assert 0 < min(s["vertices_kept"] for s in res.samples) < scene.num_vertices

@@ -121,9 +121,9 @@ def test_round_kernels_match_numpy(device):
 
 
 def test_build_runs_the_kernels_on_a_grid():
-    """A whole build through the kernels on a flat grid reaches its base and keeps one root per base vertex."""
+    """A whole rounds build through the kernels on a flat grid reaches its base and keeps one root per base vertex."""
     pos, faces = wavy_grid(16)
-    h = build_hierarchy(pos, faces, np.tile([0, 1.0, 0], (len(pos), 1)), target_base=8)
+    h = build_hierarchy(pos, faces, np.tile([0, 1.0, 0], (len(pos), 1)), target_base=8, method="rounds")
     assert h.num_nodes > len(pos) and len(h.roots) < 40
 
 
@@ -176,10 +176,10 @@ def test_threads_build_the_same_hierarchy(monkeypatch):
 
     pos, faces = wavy_grid(24)
     normals = np.tile([0, 1.0, 0], (len(pos), 1))
-    one = build_hierarchy(pos, faces, normals, target_base=8, workers=1)
+    one = build_hierarchy(pos, faces, normals, target_base=8, workers=1, method="rounds")
     monkeypatch.setattr(launches, "SPLIT_MIN", 2)
     for workers in (2, 3):
-        many = build_hierarchy(pos, faces, normals, target_base=8, workers=workers)
+        many = build_hierarchy(pos, faces, normals, target_base=8, workers=workers, method="rounds")
         for name in ("parent", "children", "vertex", "creation", "cone_axis", "cone_half_angle", "radius",
                      "error_vector", "neighbours", "neighbour_offsets", "leaf_order", "leaf_range"):
             np.testing.assert_array_equal(getattr(many, name), getattr(one, name), err_msg=name)

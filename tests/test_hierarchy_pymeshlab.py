@@ -118,7 +118,7 @@ def test_tiles_and_workers_on_several_components(monkeypatch):
 def test_unknown_method_is_refused():
     """An unknown build is a one-line LodprtError naming the choices, from the API and from the command line."""
     pos, faces = wavy_grid(5)
-    with pytest.raises(LodprtError, match="choose one of rounds, pymeshlab"):
+    with pytest.raises(LodprtError, match="choose one of sequential, rounds, pymeshlab"):
         build_hierarchy(pos, faces, vertex_normals(pos, faces), method="qslim")
     from lodprt.cli.main import main
 

@@ -52,12 +52,13 @@ def add_jobs(p: argparse.ArgumentParser, each: str) -> None:
 
 
 def add_hierarchy_method(p: argparse.ArgumentParser) -> None:
-    """``--hierarchy rounds|pymeshlab``: the vertex hierarchy's build (``build_hierarchy(method=...)``)."""
+    """``--hierarchy sequential|rounds|pymeshlab``: the vertex hierarchy's build (``build_hierarchy(method=...)``)."""
     from lodprt.model.hierarchy_build import METHODS
 
     p.add_argument("--hierarchy", default=METHODS[0], metavar="METHOD",
-                   help=f"vertex hierarchy build: {' or '.join(METHODS)} (default {METHODS[0]}: rounds of parallel "
-                   "QEM collapses; pymeshlab: the same rounds replaying pymeshlab's QEM halvings, docs/HIERARCHY.md)")
+                   help=f"vertex hierarchy build: {', '.join(METHODS)} (default {METHODS[0]}: QEM half-edge "
+                   "collapses one at a time in Warp kernels, one thread per mesh unit; rounds: rounds of parallel QEM "
+                   "collapses; pymeshlab: the same rounds replaying pymeshlab's QEM halvings; docs/HIERARCHY.md)")
 
 
 def add_json(p: argparse.ArgumentParser, what: str = "a JSON object") -> None:

@@ -157,9 +157,11 @@ def _bake_environment(args) -> int:
                           "bake-environment --bounces")
     if args.compress != "none":
         raise LodprtError("--compress is a point-light option; the transfer store of --environment has no codec")
-    if args.hierarchy != "rounds":
+    from lodprt.model.hierarchy_build import METHODS
+
+    if args.hierarchy != METHODS[0]:
         raise LodprtError("--hierarchy is a point-light option; an environment bake builds its hierarchy with "
-                          "bake-environment --lod-threshold (rounds)")
+                          f"bake-environment --lod-threshold ({METHODS[0]})")
     if args.full or args.no_hierarchy:
         raise LodprtError("--full and --no-hierarchy are point-light options; an environment bake has no light "
                           "cut (see bake-environment --lod-threshold)")

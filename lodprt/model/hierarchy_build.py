@@ -1,7 +1,9 @@
 """Vertex hierarchy build (SPEC 3; thesis 3.2, figures 5-7 and 10; Hoppe 97; El-Sana & Varshney 99; tag H-R):
-``build_hierarchy``.
+``build_hierarchy``. Its default, ``method="sequential"``, hands the mesh to ``lodprt.model.hierarchy_greedy`` (tag
+H-G: the same collapses, costs, rules and node attributes, made one at a time); the rest of this module is the
+rounds build (``method="rounds"``, and the rounds of ``"pymeshlab"``).
 
-Steps: input checks; mesh groups (connected components, split further by ``component``); topology (boundary,
+The rounds' steps: input checks; mesh groups (connected components, split further by ``component``); topology (boundary,
 non-manifold vertices, read from the first round's one-rings) and Garland-Heckbert quadrics (summed per vertex by
 the ``plane_sums`` kernel); rounds of parallel half-edge collapses ``v -> u`` (figure 5;
 ``lodprt.model.hierarchy_rounds``: QEM order, link condition, boundary rules, valence, fold-over (figure 6) and
@@ -24,24 +26,22 @@ from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import Hierarchy, concat_ranges, leaf_layout
 from lodprt.model.hierarchy_attributes import merge_cones
+from lodprt.model.hierarchy_inputs import BOUNDARY_WEIGHT, CONE_SLACK, checked_inputs
 from lodprt.model.hierarchy_levels import mesh_groups
 from lodprt.launches import KernelThreads, warp_view
 from lodprt.model.hierarchy_rounds import QUADRIC_ENTRIES, CollapseRounds, one_rings
 
 log = logging.getLogger(__name__)
 
-#: weight of the Garland-Heckbert boundary planes relative to the face quadrics
-BOUNDARY_WEIGHT = 100.0
-#: slack (radians) added to every stored cone half-angle to cover float32 rounding of axis and angle
-CONE_SLACK = 1e-6
 #: the build stops after a round that made fewer collapses than this fraction of the vertices that may still
 #: collapse (the tail: a round costs what the live mesh costs, for next to nothing)
 MIN_ROUND = 1e-2
 #: the build stops after at most this many rounds (a bound only: it stops long before, docs/HIERARCHY.md)
 MAX_ROUNDS = 2000
-#: the builds ``build_hierarchy(method=...)`` offers: rounds of parallel QEM collapses in numpy (the default), or
-#: the same rounds replaying pymeshlab's chained QEM halvings level by level (docs/HIERARCHY.md)
-METHODS = ("rounds", "pymeshlab")
+#: the builds ``build_hierarchy(method=...)`` offers: the QEM collapses one at a time in Warp kernels, one thread
+#: per mesh unit (``lodprt.model.hierarchy_greedy``, the default), rounds of parallel QEM collapses, or the same rounds
+#: replaying pymeshlab's chained QEM halvings level by level (docs/HIERARCHY.md)
+METHODS = ("sequential", "rounds", "pymeshlab")
 
 
 def check_method(method) -> str:
@@ -49,40 +49,6 @@ def check_method(method) -> str:
     if method not in METHODS:
         raise LodprtError(f"hierarchy method {method!r}: choose one of {', '.join(METHODS)}")
     return method
-
-
-def _checked_inputs(positions, faces, normals, component, target_base):
-    """The inputs as float64 positions, int32 faces, unit float64 normals and (V,) int components (zeros when
-    ``component`` is None); raises LodprtError naming the bad input."""
-    positions = np.asarray(positions, np.float64)
-    normals = np.asarray(normals, np.float64)
-    faces = np.asarray(faces)
-    if positions.ndim != 2 or positions.shape[1] != 3 or normals.shape != positions.shape:
-        raise LodprtError(f"build_hierarchy: positions and normals must both be (V, 3), got {positions.shape} and "
-                          f"{normals.shape}")
-    V = len(positions)
-    if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer):
-        raise LodprtError(f"build_hierarchy: faces must be an (F, 3) integer array, got {faces.shape} {faces.dtype}")
-    if len(faces) and (faces.min() < 0 or faces.max() >= V):
-        raise LodprtError(f"build_hierarchy: faces index vertices {faces.min()}..{faces.max()} outside 0..{V - 1}")
-    if V >= 2**31 - 1 or 2 * V >= 2**31:
-        raise LodprtError(f"build_hierarchy: {V} vertices do not fit int32 node ids")
-    faces = faces.astype(np.int32)
-    if not np.isfinite(positions).all():
-        raise LodprtError("build_hierarchy: non-finite vertex positions")
-    if not np.isfinite(normals).all():
-        raise LodprtError("build_hierarchy: non-finite vertex normals")
-    comp = None
-    if component is not None:
-        comp = np.asarray(component)
-        if comp.shape != (V,) or not np.issubdtype(comp.dtype, np.integer):
-            raise LodprtError(f"build_hierarchy: component must be a (V,) = ({V},) integer array, got "
-                              f"{comp.shape} {comp.dtype}")
-    if int(target_base) < 1:
-        raise LodprtError(f"build_hierarchy: target_base must be >= 1 face, got {target_base}")
-    nrm = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.where(nrm > 0, normals / np.where(nrm > 0, nrm, 1), [0.0, 1.0, 0.0])
-    return positions, faces, normals, comp
 
 
 def _plane_quadrics(q: np.ndarray, planes: np.ndarray, weight: np.ndarray, corners: list[np.ndarray]) -> None:
@@ -317,7 +283,7 @@ def build_hierarchy(
     target_base: int = 64,
     keep_boundary: bool = False,
     progress: Callable[[int, int], None] | None = None,
-    method: str = "rounds",
+    method: str = "sequential",
     workers: int | None = None,
 ) -> Hierarchy:
     """Build the binary vertex hierarchy of a triangle mesh (module docstring, docs/HIERARCHY.md).
@@ -332,15 +298,26 @@ def build_hierarchy(
     ``progress(done, total)`` reports collapses made against the number of vertices that may collapse. Open
     boundaries, several components, non-manifold edges, duplicated vertices and faces with a repeated corner are
     accepted; unreferenced vertices become isolated roots. Raises LodprtError naming the bad input otherwise.
-    ``method``: ``"rounds"`` (the default) orders the collapses by the rounds' own QEM costs; ``"pymeshlab"``
-    replays pymeshlab's chained QEM halvings (``lodprt.model.hierarchy_pymeshlab``, on ``workers`` processes:
+    ``method``: ``"sequential"`` (the default) makes the collapses one at a time, cheapest class first, in Warp
+    kernels on ``workers`` threads, one mesh unit each (``lodprt.model.hierarchy_greedy.build_greedy``: the same
+    costs, legality rules and node attributes, about 3 evaluations per collapse); ``"rounds"`` makes them in rounds
+    of parallel collapses ordered by the rounds' own QEM costs; ``"pymeshlab"`` replays pymeshlab's chained QEM halvings (``lodprt.model.hierarchy_pymeshlab``, on ``workers`` processes:
     default every core) level by level with the same rounds, collapses and node attributes (docs/HIERARCHY.md).
-    Either way the round kernels run on ``workers`` threads (default every core; ``KernelThreads``): the same
-    hierarchy, bit for bit, on any number.
+    The round kernels, too, run on ``workers`` threads (default every core; ``KernelThreads``): each build gives the
+    same hierarchy, bit for bit, on any number.
     """
     t0 = time.perf_counter()
     check_method(method)
-    positions, faces, normals, comp = _checked_inputs(positions, faces, normals, component, target_base)
+    if method == "sequential":
+        from lodprt.model.hierarchy_greedy import build_greedy
+
+        hier = build_greedy(positions, faces, normals, component=component, target_base=target_base,
+                            keep_boundary=keep_boundary, workers=workers, progress=progress)
+        log.info("hierarchy (sequential): %d vertices, %d nodes, %d roots, depth %d, %.1f s", hier.num_vertices,
+                 hier.num_nodes, len(hier.roots), hier.depth, hier.build_seconds)
+        return hier
+    positions, faces, normals, comp = checked_inputs("build_hierarchy", positions, faces, normals, component,
+                                                        target_base)
     V = len(positions)
     # faces with a repeated corner carry no area or orientation: they take no part in the collapses
     good = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])

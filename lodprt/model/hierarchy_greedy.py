@@ -4,8 +4,8 @@ The same kind of hierarchy as ``lodprt.model.hierarchy_build`` (legal half-edge 
 order, the same costs, legality rules, cones, radii, error vectors and recorded neighbours), made by one Warp
 thread per unit of the mesh instead of rounds of parallel passes: a collapse is made on the mesh as it stands and
 only the survivor's ring is evaluated again, so the build evaluates about 3 moves per collapse where the rounds
-evaluate every live vertex every round (docs/HIERARCHY.md, "The sequential build"). Opt-in for now:
-``bake(scene, path, tree=build_greedy(...))``.
+evaluate every live vertex every round (docs/HIERARCHY.md, "The sequential build"). The default build:
+``build_hierarchy`` (``method="sequential"``), ``bake`` and ``lodprt bake`` call it.
 
 Units are whole connected components (each holding its groups: split further by ``component``); a component with
 more than ``TILE`` movable vertices is first built in tiles of about that many, its tiles' borders waiting for a
@@ -26,7 +26,7 @@ from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.launches import warp_view
 from lodprt.model.hierarchy import Hierarchy
-from lodprt.model.hierarchy_build import BOUNDARY_WEIGHT, CONE_SLACK
+from lodprt.model.hierarchy_inputs import BOUNDARY_WEIGHT, CONE_SLACK, checked_inputs
 from lodprt.model.hierarchy_levels import mesh_groups
 from lodprt.model.hierarchy_rounds import EDGE_WEIGHT, FOLD_COS, MAX_VALENCE, SLIVER
 
@@ -42,32 +42,12 @@ TILE = 20_000
 
 def _inputs(positions, faces, normals, component, target_base):
     """float64 positions, int32 faces without repeated corners, unit float64 normals, int32 groups (moves stay
-    within one) and connected components (the units)."""
-    pos = np.ascontiguousarray(positions, np.float64)
-    nrm = np.asarray(normals, np.float64)
-    f = np.asarray(faces)
-    for name, a, shape in (("positions", pos, 3), ("normals", nrm, 3), ("faces", f, 3)):
-        if a.ndim != 2 or a.shape[1] != shape:
-            raise LodprtError(f"build_greedy: {name} must be an (N, 3) array, got {a.shape}")
+    within one) and connected components (the units); ``checked_inputs`` refuses bad input."""
+    pos, f, nrm, comp = checked_inputs("build_greedy", positions, faces, normals, component, target_base)
     V = len(pos)
-    if nrm.shape != pos.shape or not np.issubdtype(f.dtype, np.integer):
-        raise LodprtError(f"build_greedy: normals {nrm.shape} must match positions {pos.shape}, and faces be "
-                          f"integers (got {f.dtype})")
-    if len(f) and (f.min() < 0 or f.max() >= V):
-        raise LodprtError(f"build_greedy: faces index vertices {f.min()}..{f.max()} outside 0..{V - 1}")
-    if not (np.isfinite(pos).all() and np.isfinite(nrm).all()):
-        raise LodprtError("build_greedy: non-finite positions or normals")
-    if 2 * V >= 2**31 - 1 or int(target_base) < 1:
-        raise LodprtError(f"build_greedy: {V} vertices (at most 2^30) and target_base {target_base} (at least 1)")
-    if component is not None and (np.shape(component) != (V,) or not np.issubdtype(np.asarray(component).dtype,
-                                                                                   np.integer)):
-        raise LodprtError(f"build_greedy: component must be a (V,) = ({V},) integer array")
-    length = np.linalg.norm(nrm, axis=1, keepdims=True)
-    nrm = np.where(length > 0, nrm / np.where(length > 0, length, 1), [0.0, 1.0, 0.0])
-    f = f.astype(np.int32)
     f = np.ascontiguousarray(f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])])
     pieces = mesh_groups(V, f).astype(np.int32)
-    group = pieces if component is None else mesh_groups(V, f, np.asarray(component)).astype(np.int32)
+    group = pieces if comp is None else mesh_groups(V, f, comp).astype(np.int32)
     return pos, f, nrm, group, pieces
 
 
@@ -201,13 +181,14 @@ def _tiles(pos, faces, pieces, movable):
     return funit.astype(np.int32), vunit.astype(np.int32)
 
 
-def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers):
+def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report):
     """One phase: a launch per unit of ``units`` ((V,) unit of each vertex, -1: it stays; (F,) unit of each face),
     the largest first, on up to ``workers`` threads that each take the next unit when done; each unit stops at
     ``target_base`` faces of ``counters`` ((V,) the counter of each vertex, (F,) of each face). Units share no face
     or vertex they change, and each has its own node and neighbour range, so the result does not depend on the
-    threads. The nodes are compacted from node ``at``; returns the next free node, the recorded neighbours and the
-    most rounds of a unit."""
+    threads. ``report(collapses)`` is called with the collapses of the units done so far, in the calling thread. The
+    nodes are compacted from node ``at``; returns the next free node, the recorded neighbours and the most rounds of
+    a unit."""
     vunit, funit = units
     wp = warp()
     nd, arr = nd_arr
@@ -233,8 +214,11 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers):
         wp.launch(kh.greedy_build, dim=1, device="cpu", inputs=[m, s, q, t, nd, unit_wp, u, int(node_base[u]),
                                                                 int(target_base), EDGE_WEIGHT, FOLD_COS, SLIVER,
                                                                 MAX_VALENCE])
+        done.append(u)
 
-    _run(lambda: (_scratch(kh, V), _queue(kh, V)), launch, todo, workers)
+    done = []
+    _run(lambda: (_scratch(kh, V), _queue(kh, V)), launch, todo, workers,
+         lambda: report(sum(int(ctrs[u][1]) for u in list(done))))
     if any(c[5] for c in ctrs.values()):
         raise LodprtError("build_greedy: neighbour space exhausted (an internal sizing error)")
     nbs = nd.nbs.numpy()
@@ -261,10 +245,13 @@ def _compact(arr, node_of, at, node_base, made):
 
 
 def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, *, component=None,
-                 target_base: int = 64, keep_boundary: bool = False, workers: int | None = None) -> Hierarchy:
+                 target_base: int = 64, keep_boundary: bool = False, workers: int | None = None,
+                 progress=None) -> Hierarchy:
     """The vertex hierarchy of a triangle mesh built in sequence (module docstring): the arguments and the result
-    of ``lodprt.model.hierarchy_build.build_hierarchy`` (no progress reports: one launch per unit). A vertex with
-    more than ``CAP`` (128) neighbours takes part in no collapse. Raises LodprtError naming the bad input."""
+    of ``lodprt.model.hierarchy_build.build_hierarchy``, which calls it for ``method="sequential"`` (its default).
+    ``progress(collapses, total)`` is called as units finish (one launch per unit: a scene of one small component
+    reports once). A vertex with more than ``CAP`` (128) neighbours takes part in no collapse. Raises LodprtError
+    naming the bad input."""
     from lodprt.devices import load_kernels
     from lodprt.kernels import hierarchy_greedy as kh
     from lodprt.kernels import hierarchy_prepare as kp
@@ -283,8 +270,15 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     if tiles is not None:  # tiles first (each its own counter), their borders waiting; then whole components
         phases.insert(0, ((tiles[1], tiles[0]), (tiles[1], tiles[0])))
     at, recorded, rounds = V, [], 0
+    total = int(movable.sum())
     for units, counters in phases:
-        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers)
+        before = at - V
+
+        def report(made, before=before):
+            if progress is not None:
+                progress(before + made, total)
+
+        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report)
         recorded += rec
         rounds += r
     h = _hierarchy(kp, nd_arr[1], at, V, np.concatenate(recorded), rounds)
@@ -292,16 +286,17 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     return h
 
 
-def _run(make, launch, todo, workers):
+def _run(make, launch, todo, workers, after):
     """``launch(*make(), unit)`` for every unit of ``todo``, in order, on up to ``workers`` threads (default: every
-    core this process may use; a CPU launch releases the GIL), each with its own ``make()`` (scratch, queue)."""
+    core this process may use; a CPU launch releases the GIL), each with its own ``make()`` (scratch, queue);
+    ``after()`` in the calling thread after each of its units and at the end."""
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     left = list(todo)
     lock = threading.Lock()
     failed = []
 
-    def work():
+    def work(caller=False):
         own = make()
         while True:
             with lock:
@@ -313,15 +308,18 @@ def _run(make, launch, todo, workers):
             except BaseException as e:  # noqa: BLE001 (re-raised in the calling thread)
                 failed.append(e)
                 return
+            if caller:
+                after()
 
     threads = [threading.Thread(target=work) for _ in range(max(1, min(int(workers), len(left))) - 1)]
     for th in threads:
         th.start()
-    work()
+    work(caller=True)
     for th in threads:
         th.join()
     if failed:
         raise failed[0]
+    after()
 
 
 def _hierarchy(kp, arr, N, V, nbs, rounds) -> Hierarchy:
@@ -341,4 +339,4 @@ def _hierarchy(kp, arr, N, V, nbs, rounds) -> Hierarchy:
                      cone_half_angle=half, radius=(arr["radius"][:N] * (1 + 1e-6)).astype(np.float32),
                      error_vector=arr["error"][:N].astype(np.float32), neighbour_offsets=offsets,
                      neighbours=nbs.astype(np.int32, copy=False), leaf_order=leaf_order, leaf_range=leaf_range,
-                     levels=rounds, method="greedy")
+                     levels=rounds, method="sequential")

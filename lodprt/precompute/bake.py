@@ -183,7 +183,7 @@ def bake(
     add_samples: bool = False,
     workers: int | None = None,
     scheduler: str | None = None, compress: str = "none",
-    hierarchy_method: str = "rounds", vertex_range: int | None = None,
+    hierarchy_method: str = "sequential", vertex_range: int | None = None,
 ) -> BakeResult:
     """Bake light samples of ``scene`` and write the store at ``out``.
 
@@ -192,8 +192,8 @@ def bake(
     (or ``threshold_deg=None``) bakes every referenced vertex (full resolution, ``lodprt bake --full``), and so
     does ``hierarchy=False`` with the default threshold (``--no-hierarchy``: no hierarchy, no light cut).
     With ``hierarchy`` the vertex hierarchy (``lodprt.model.hierarchy_build``) is built first (or ``tree`` is used) and
-    stored under ``hierarchy/``; ``hierarchy_method`` picks its build (``build_hierarchy(method=...)``: "rounds",
-    the default, or "pymeshlab"; docs/HIERARCHY.md).
+    stored under ``hierarchy/``; ``hierarchy_method`` picks its build (``build_hierarchy(method=...)``:
+    "sequential", the default, "rounds" or "pymeshlab"; docs/HIERARCHY.md).
     ``out=None`` bakes without writing (benchmarks). ``progress(done, total)`` is called after each sample,
     ``hierarchy_progress(collapses, total)`` while the hierarchy is built.
     Raises StoreError before any work when ``out`` exists and ``overwrite`` is false.
