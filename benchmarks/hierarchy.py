@@ -1,6 +1,6 @@
-"""Vertex hierarchy builds compared on the same meshes in the same run: the rounds build (default) against the
-sequential build (``lodprt.model.hierarchy_greedy.build_greedy``, opt-in), the pymeshlab-seeded build
-(``build_hierarchy(method="pymeshlab")``), and pymeshlab's plain QEM decimation.
+"""Vertex hierarchy builds compared on the same meshes in the same run: the sequential build (the default,
+``build_hierarchy(method="sequential")``) against the rounds build (``method="rounds"``), the pymeshlab-seeded build
+(``method="pymeshlab"``), pymeshlab's plain QEM decimation and meshoptimizer's halving.
 
     python benchmarks/hierarchy.py [--quick] [--json PATH] [--device cpu|cuda]
 
@@ -8,7 +8,7 @@ Meshes: the Stanford bunny (tests/data) on a 380 x 380 floor (180,347 vertices, 
 (quick: the bunny on a 60 x 60 floor). Every build runs in a fresh child process (``python benchmarks/hierarchy.py --child
 METHOD MESH``), which reports:
 
-* ``build s``: the build's own time (the rounds and the sequential build: the best of ``REPEATS`` builds in the
+* ``build s``: the build's own time (the sequential and the rounds build: the best of ``REPEATS`` builds in the
   child, on every core; the others: one build); ``B/vertex``: the child's peak resident memory (``VmHWM``) above its
   resident size just before the first build, per vertex; ``worker MiB``: the largest peak of the pymeshlab worker
   processes (``RUSAGE_CHILDREN``; fresh interpreters, so Python, numpy and pymeshlab's own ~100 MiB included; at
@@ -21,7 +21,7 @@ METHOD MESH``), which reports:
   (``lodprt.display.compare.frame_error``). Not triangles at equal PSNR: one bound, one view, both builds.
 
 ``pymeshlab 1p`` is the pymeshlab build on one process (build only); ``QEM only`` is pymeshlab decimating the
-whole scene straight to the rounds build's base size in one call (time only); ``meshopt 1/2`` is meshoptimizer's
+whole scene straight to the default build's base size in one call (time only); ``meshopt 1/2`` is meshoptimizer's
 ``simplify`` halving the same scene in the same run (time only; ``x meshopt``: each build's time over it, the
 issue's yardstick: at most 10). Writes
 benchmarks/results/hierarchy[-quick].json and .png.
@@ -103,23 +103,17 @@ def child(method: str, name: str, device: str) -> dict:
     load_kernels("cpu", kernels)  # the round kernels' module (compiled once, then loaded from Warp's cache)
     if method.startswith("pymeshlab"):
         import pymeshlab  # noqa: F401  (its import, about 30 MiB, is not the build's memory)
-    from lodprt.model.hierarchy_greedy import build_greedy
-
-    if method == "greedy":
-        build_greedy(scene.positions[:3], np.array([[0, 1, 2]]), scene.normals[:3])  # its kernels, compiled or loaded
     before = _status("VmRSS")
     workers = 1 if method == "pymeshlab-1p" else None
 
     def build():
-        if method == "greedy":
-            return build_greedy(scene.positions, scene.faces, scene.normals)
         return build_hierarchy(scene.positions, scene.faces, scene.normals, method=method.split("-")[0],
                                workers=workers)
 
     h = build()
     peak = _status("VmHWM") - before
     seconds = [h.build_seconds]
-    for _ in range(REPEATS - 1 if method in ("rounds", "greedy") else 0):  # the best of a few: the cores are shared
+    for _ in range(REPEATS - 1 if method in ("rounds", "sequential") else 0):  # the best of a few: the cores are shared
         seconds.append(build().build_seconds)
     out = {"method": method, "mesh": scene.source, "vertices": scene.num_vertices, "build_s": min(seconds),
            "bytes_per_vertex": peak / scene.num_vertices,
@@ -168,7 +162,7 @@ def plot(rows: list[dict], name: str) -> None:
     import matplotlib.pyplot as plt
 
     meshes = list(dict.fromkeys(r["mesh"] for r in rows))
-    methods = ("rounds", "greedy", "pymeshlab")
+    methods = ("sequential", "rounds", "pymeshlab")
     panels = (("build_s", "build seconds"), ("bytes_per_vertex", "peak bytes / vertex (main process)"),
               ("light_cut_vertices", "5-degree light cut: vertices kept"), ("view_triangles", "view cut triangles"))
     fig, axes = plt.subplots(1, len(panels), figsize=(14, 3.2))
@@ -201,25 +195,25 @@ def main():
     device = resolve_device(args.device)
     rows = []
     for name in QUICK if args.quick else FULL:
-        methods = ("rounds", "greedy", "pymeshlab") + (("pymeshlab-1p",) if name == "bunny380" else ())
+        methods = ("sequential", "rounds", "pymeshlab") + (("pymeshlab-1p",) if name == "bunny380" else ())
         for method in methods:
             rows.append(run_child(method, name, device))
             r = rows[-1]
             print(f"{r['mesh']} {method}: {r['build_s']:.1f} s, {r['roots']:,} roots", flush=True)
-        rounds = next(r for r in rows if r["mesh"] == rows[-1]["mesh"] and r["method"] == "rounds")
-        rows.append({"method": "QEM only", "mesh": rounds["mesh"], "vertices": rounds["vertices"],
-                     "build_s": qem_only(name, rounds["roots"])})
+        seq = next(r for r in rows if r["mesh"] == rows[-1]["mesh"] and r["method"] == "sequential")
+        rounds = next(r for r in rows if r["mesh"] == seq["mesh"] and r["method"] == "rounds")
+        rows.append({"method": "QEM only", "mesh": seq["mesh"], "vertices": seq["vertices"],
+                     "build_s": qem_only(name, seq["roots"])})
         scene = scene_of(name)
         meshopt_halving(scene.positions, scene.faces)  # its first call pays for the module's start-up
         half = min(meshopt_halving(scene.positions, scene.faces) for _ in range(3))
         for r in rows:
-            if r["mesh"] == rounds["mesh"]:
+            if r["mesh"] == seq["mesh"]:
                 r["meshopt_s"], r["x_meshopt"] = half, r["build_s"] / half
-        rows.append({"method": "meshopt 1/2", "mesh": rounds["mesh"], "vertices": rounds["vertices"],
+        rows.append({"method": "meshopt 1/2", "mesh": seq["mesh"], "vertices": seq["vertices"],
                      "build_s": half, "meshopt_s": half, "x_meshopt": 1.0})
-        seq = next(r for r in rows if r["mesh"] == rounds["mesh"] and r["method"] == "greedy")
-        print(f"{rounds['mesh']}: meshoptimizer halving {half:.3f} s, rounds build {rounds['x_meshopt']:.1f}x it, "
-              f"sequential build {seq['x_meshopt']:.1f}x", flush=True)
+        print(f"{seq['mesh']}: meshoptimizer halving {half:.3f} s, sequential build (default) {seq['x_meshopt']:.1f}x "
+              f"it, rounds build {rounds['x_meshopt']:.1f}x", flush=True)
     print(table(rows, [("mesh", "mesh", "s"), ("method", "build", "s"), ("vertices", "vertices", ","),
                        ("build_s", "build s", ".2f"), ("x_meshopt", "x meshopt", ".1f"), ("bytes_per_vertex", "B/vertex", ".0f"),
                        ("worker_mib", "worker MiB", ".0f"), ("roots", "roots", ","), ("depth", "depth", "d"),

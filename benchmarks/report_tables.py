@@ -196,7 +196,8 @@ def light_spacing(r: dict) -> str:
 
 
 def hierarchy(r: dict) -> str:
-    label = {"rounds": "`rounds`", "greedy": "sequential (`build_greedy`, opt-in)",
+    label = {"sequential": "`sequential` (default)", "rounds": "`rounds`",
+             "meshopt 1/2": "meshoptimizer `simplify`, one halving",
              "pymeshlab": "`pymeshlab` (2 worker processes)",
              "pymeshlab-1p": "`pymeshlab` (`workers=1`, in process)", "QEM only": "pymeshlab alone, to the same base"}
     rows = []
@@ -207,17 +208,18 @@ def hierarchy(r: dict) -> str:
                                                  if row.get("worker_mib") else "")
         view = (f"{n(row['view_triangles'])} triangles, {row['psnr_db']:.1f} dB" if "view_triangles" in row else "")
         rows.append([row["mesh"].replace("x", " x "), label.get(row["method"], row["method"]), f(row["build_s"], 2),
-                     mem, n(row["roots"]) if "roots" in row else "", row.get("depth", ""),
+                     f(row["x_meshopt"], 1) if "x_meshopt" in row else "", mem, n(row["roots"]) if "roots" in row else "", row.get("depth", ""),
                      n(row["light_cut_vertices"]) if "light_cut_vertices" in row else "", view])
-    return md(["mesh", "build", "build s", "peak B/vertex", "roots", "depth", "5-degree light cut (vertices)",
+    return md(["mesh", "build", "build s", "x meshopt 1/2", "peak B/vertex", "roots", "depth", "5-degree light cut (vertices)",
                "view cut at the screen bound 0.8, one view"], rows)
 
 
 def scale_hierarchy(r: dict) -> str:
     rows = [[row["floor"], n(row["vertices"]), f(row["hierarchy_s"]), f(row["pymeshlab_s"]), f(row["ratio"], 2),
-             n(row["hierarchy_b_per_v"]), n(row["pymeshlab_b_per_v"]), n(row["roots"]), row["depth"], row["rounds"]]
+             f(row["meshopt_s"], 2), f(row["x_meshopt"], 1), n(row["hierarchy_b_per_v"]), n(row["pymeshlab_b_per_v"]), n(row["roots"]), row["depth"], row["rounds"]]
             for row in r["vertex_rows"]]
-    return md(["floor", "vertices", "hierarchy s", "halving s", "x halving", "build B/vertex", "halving B/vertex",
+    return md(["floor", "vertices", "hierarchy s", "halving s", "x halving", "meshopt 1/2 s", "x meshopt 1/2",
+               "build B/vertex", "halving B/vertex",
                "roots", "depth", "rounds"], rows)
 
 

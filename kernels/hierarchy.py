@@ -59,6 +59,30 @@ def is_neighbour(start: wp.array(dtype=wp.int64), end: wp.array(dtype=wp.int64),
 
 
 @wp.func
+def survivor_valence_ok(after: int, u_on_boundary: wp.uint8, max_valence: int):
+    """The survivor's valence after a collapse: at most ``max_valence``, at least 3 (2 on the boundary)."""
+    least = 3
+    if u_on_boundary != wp.uint8(0):
+        least = 2
+    return after <= max_valence and after >= least
+
+
+@wp.func
+def moved_face_ok(pv: wp.vec3d, pu: wp.vec3d, pb: wp.vec3d, pc: wp.vec3d, fold_cos: wp.float64,
+                  sliver: wp.float64):
+    """Whether the face (v, b, c) moved to (u, b, c) neither turns over (figure 6: the cosine of its normal's turn
+    above ``fold_cos``) nor becomes a sliver (twice its area above ``sliver`` x its longest edge squared)."""
+    old = wp.cross(pb - pv, pc - pv)
+    e1 = pb - pu
+    e2 = pc - pu
+    new = wp.cross(e1, e2)
+    n2 = wp.dot(new, new)
+    fold = wp.dot(old, new) <= fold_cos * wp.sqrt(n2 * wp.dot(old, old))
+    lmax = wp.max(wp.max(wp.dot(e1, e1), wp.dot(e2, e2)), wp.dot(pc - pb, pc - pb))
+    return not (fold or n2 <= (sliver * lmax) * (sliver * lmax))
+
+
+@wp.func
 def legal_move(
     v: int, u: int, e: int,
     pos: wp.array2d(dtype=wp.float64), faces: wp.array2d(dtype=wp.int32), boundary: wp.array(dtype=wp.uint8),
@@ -74,10 +98,7 @@ def legal_move(
         if w != u and is_neighbour(start, end, dst, u, w):
             common += 1
     after = int(end[u] - start[u]) + int(end[v] - start[v]) - common - 2
-    least = 3
-    if boundary[u] != wp.uint8(0):
-        least = 2
-    ok = common == count[e] and after <= max_valence and after >= least
+    ok = common == count[e] and survivor_valence_ok(after, boundary[u], max_valence)
     pv = vec_at(pos, v)
     pu = vec_at(pos, u)
     k = int(fstart[v])
@@ -90,17 +111,7 @@ def legal_move(
         k += 1
         if b == u or cc == u:
             continue  # the faces on uv vanish
-        pb = vec_at(pos, b)
-        pc = vec_at(pos, cc)
-        old = wp.cross(pb - pv, pc - pv)
-        e1 = pb - pu
-        e2 = pc - pu
-        new = wp.cross(e1, e2)
-        n2 = wp.dot(new, new)
-        fold = wp.dot(old, new) <= fold_cos * wp.sqrt(n2 * wp.dot(old, old))
-        lmax = wp.max(wp.max(wp.dot(e1, e1), wp.dot(e2, e2)), wp.dot(pc - pb, pc - pb))
-        if fold or n2 <= (sliver * lmax) * (sliver * lmax):
-            ok = False
+        ok = moved_face_ok(pv, pu, vec_at(pos, b), vec_at(pos, cc), fold_cos, sliver)
     return ok
 
 

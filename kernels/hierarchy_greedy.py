@@ -21,7 +21,7 @@ are clamped into the queue's rows, node and neighbour writes stay in the unit's 
 
 import warp as wp
 
-from lodprt.kernels.hierarchy import closest_on_triangle, quadric_at, vec_at
+from lodprt.kernels.hierarchy import closest_on_triangle, moved_face_ok, quadric_at, survivor_valence_ok, vec_at
 
 wp.set_module_options({"enable_backward": False, "optimization_level": 3})
 
@@ -220,11 +220,7 @@ def legal(m: Mesh, s: Scratch, v: int, u: int, nv: int, cnt_uv: int, st: int, fo
         w = s.ring[i]
         if w != u and s.seen2[w] == st:
             common += 1
-    after = nu + nv - common - 2
-    least = 3
-    if m.boundary[u] != wp.uint8(0):
-        least = 2
-    if common != cnt_uv or after > max_valence or after < least:
+    if common != cnt_uv or not survivor_valence_ok(nu + nv - common - 2, m.boundary[u], max_valence):
         return False
     pv = vec_at(m.pos, v)
     pu = vec_at(m.pos, u)
@@ -239,17 +235,7 @@ def legal(m: Mesh, s: Scratch, v: int, u: int, nv: int, cnt_uv: int, st: int, fo
         cc = m.faces[f, (j + 2) % 3]
         if b == u or cc == u:
             continue  # the faces on uv vanish
-        pb = vec_at(m.pos, b)
-        pc = vec_at(m.pos, cc)
-        old = wp.cross(pb - pv, pc - pv)
-        e1 = pb - pu
-        e2 = pc - pu
-        new = wp.cross(e1, e2)
-        n2 = wp.dot(new, new)
-        if wp.dot(old, new) <= fold_cos * wp.sqrt(n2 * wp.dot(old, old)):
-            return False
-        lmax = wp.max(wp.max(wp.dot(e1, e1), wp.dot(e2, e2)), wp.dot(pc - pb, pc - pb))
-        if n2 <= (sliver * lmax) * (sliver * lmax):
+        if not moved_face_ok(pv, pu, vec_at(m.pos, b), vec_at(m.pos, cc), fold_cos, sliver):
             return False
     return True
 

@@ -195,3 +195,25 @@ def test_a_bake_with_it_stores_it_whole(tmp_path):
     for name in h.ARRAYS:
         np.testing.assert_array_equal(getattr(stored, name), getattr(h, name), err_msg=name)
     assert 0 < min(s["vertices_kept"] for s in res.samples) < scene.num_vertices
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_default_build_reports_progress_in_the_calling_thread(monkeypatch, workers):
+    """``build_hierarchy`` (its default method is this build) reports ``progress(collapses, total)`` from the
+    calling thread as units finish, over tiles and whole components: never decreasing, never past the total
+    (the movable vertices), ending at exactly the collapses made."""
+    import threading
+
+    import lodprt.model.hierarchy_greedy as hg
+
+    monkeypatch.setattr(hg, "TILE", 60)
+    pos, faces = two_grids()
+    calls = []
+    h = build_hierarchy(pos, faces, vertex_normals(pos, faces), workers=workers,
+                        progress=lambda done, total: calls.append((done, total, threading.get_ident())))
+    assert h.method == "sequential"
+    done = [c[0] for c in calls]
+    assert len(calls) > (4 if workers == 1 else 1)  # after each unit on one thread; at least once per phase
+    assert {c[1] for c in calls} == {len(pos)}  # every vertex of the open grids may move
+    assert done == sorted(done) and done[-1] == h.num_nodes - len(pos) <= len(pos)
+    assert {c[2] for c in calls} == {threading.get_ident()}
