@@ -152,6 +152,23 @@ def test_to_from_arrays_exact(hier):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("flaw", ["stale parent", "parent past the end", "parent created first"])
+def test_inconsistent_links_are_refused_naming_the_node(hier, flaw):
+    """``from_arrays`` (every store's hierarchy is read through it) refuses a node whose parent does not list it as
+    a child, points past the nodes, or was created before it: the run time's forced refinement assumes none."""
+    a = {k: v.copy() for k, v in hier.to_arrays().items()}
+    root = int(hier.roots[np.argmax(hier.roots >= hier.num_vertices)])  # an internal root
+    if flaw == "stale parent":
+        a["parent"][root] = root - 1  # the tiled sequential build once left such a root behind
+    elif flaw == "parent past the end":
+        a["parent"][root] = hier.num_nodes + 5
+    else:
+        child = int(hier.children[root, 0])
+        a["creation"][child], a["creation"][root] = a["creation"][root], a["creation"][child]
+    with pytest.raises(LodprtError, match=r"inconsistent: node \d+ has parent"):
+        Hierarchy.from_arrays(a)
+
+
 def independent_neighbours(h, faces, anc, node):
     """Active nodes sharing an original edge with node's leaves (from the face list, no CSR)."""
     f = anc[np.asarray(faces)]

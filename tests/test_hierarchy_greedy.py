@@ -161,6 +161,7 @@ def test_tiles_then_their_borders_stay_legal(monkeypatch):
     monkeypatch.setattr(hg, "TILE", 60)
     one, two = greedy(pos, faces, workers=1), greedy(pos, faces, workers=2)
     replay_collapses(pos, faces, two)
+    check_forest(two, len(pos), np.ones(len(pos), bool))  # the compacted phases leave no stale parent behind
     for name in one.ARRAYS:
         np.testing.assert_array_equal(getattr(one, name), getattr(two, name), err_msg=name)
     assert abs(len(two.roots) - len(whole.roots)) <= 6, (len(two.roots), len(whole.roots))

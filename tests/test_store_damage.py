@@ -126,3 +126,19 @@ def test_disk_full_outside_a_store_is_one_line_naming_the_output(tmp_path, spot_
     err = capsys.readouterr().err
     assert rc == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert f"{rad}: no space left on the device" in err
+
+
+def test_a_hierarchy_with_a_broken_link_is_refused_naming_store_and_node(tmp_path, spot_scene):
+    """A stored hierarchy whose node claims a parent that does not list it (what a stale row of the tiled sequential
+    build once left behind: the run time's forced refinement then never ended) is refused when read, naming the
+    store, the group and the node."""
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), "--device", "cpu", "--sh-order", "2"]) == 0
+    h = open_store(out).hierarchy()
+    root = int(h.roots[-1])
+    assert root >= h.num_vertices  # an internal root
+    parent = zarr.open_array(str(out / "hierarchy" / "parent"), mode="r+")
+    parent[root] = root - 1  # a node made before it, whose children are others
+    with pytest.raises(StoreError, match=rf"out\.zarr: hierarchy/: hierarchy arrays inconsistent: node {root} has "
+                                         r"parent"):
+        open_store(out).hierarchy()

@@ -130,6 +130,9 @@ class Hierarchy:
         bad = [f"{n} {d[n].shape} (expected {s})" for n, s in shapes.items() if d[n].shape != s]
         if bad:
             raise LodprtError(f"hierarchy arrays of the wrong shape: {'; '.join(bad)}")
+        broken = broken_link(d["parent"], d["children"], d["creation"])
+        if broken is not None:
+            raise LodprtError(f"hierarchy arrays inconsistent: {broken}")
         num_vertices = int((d["children"][:, 0] < 0).sum())
         if "leaf_order" not in d or "leaf_range" not in d:
             d["leaf_order"], d["leaf_range"] = leaf_layout(d["parent"], d["children"], num_vertices)
@@ -138,6 +141,26 @@ class Hierarchy:
     @property
     def nbytes(self) -> int:
         return int(sum(a.nbytes for a in self.to_arrays().values()))
+
+
+def broken_link(parent: np.ndarray, children: np.ndarray, creation: np.ndarray, chunk: int = 1 << 20) -> str | None:
+    """None when every node with a parent is one of that parent's two children and was created before it (the
+    order the cut's dependency rules read), else a description of the first node that is not. Checked in chunks of
+    ``chunk`` nodes (a bounded temporary on big hierarchies)."""
+    N = len(parent)
+    for lo in range(0, N, chunk):
+        p = parent[lo:lo + chunk]
+        c = lo + np.flatnonzero(p >= 0)
+        q = p[c - lo].astype(np.int64)
+        if len(q) and (q.max() >= N):
+            k = int(c[np.argmax(q >= N)])
+            return f"node {k} has parent {int(parent[k])}, past the {N} nodes"
+        bad = ((children[q, 0] != c) & (children[q, 1] != c)) | (creation[q] <= creation[c])
+        if bad.any():
+            k = int(c[np.argmax(bad)])
+            return (f"node {k} has parent {int(parent[k])}, whose children are {children[parent[k]].tolist()} "
+                    f"(creation {int(creation[k])} and {int(creation[parent[k]])})")
+    return None
 
 
 def depth_levels(parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

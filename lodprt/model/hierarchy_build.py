@@ -3,9 +3,9 @@
 H-G: the same collapses, costs, rules and node attributes, made one at a time); the rest of this module is the
 rounds build (``method="rounds"``, and the rounds of ``"pymeshlab"``).
 
-The rounds' steps: input checks; mesh groups (connected components, split further by ``component``); topology (boundary,
-non-manifold vertices, read from the first round's one-rings) and Garland-Heckbert quadrics (summed per vertex by
-the ``plane_sums`` kernel); rounds of parallel half-edge collapses ``v -> u`` (figure 5;
+The rounds' steps: input checks; mesh groups (connected components, split further by ``component``); topology
+(boundary, non-manifold vertices, read from the first round's one-rings) and Garland-Heckbert quadrics (summed per
+vertex by the ``plane_sums`` kernel); rounds of parallel half-edge collapses ``v -> u`` (figure 5;
 ``lodprt.model.hierarchy_rounds``: QEM order, link condition, boundary rules, valence, fold-over (figure 6) and
 sliver tests), each collapse creating the next node (creation number = node id, fine to coarse) with its normal
 cone, bounding radius (figure 7) and error vector (figure 10, ``lodprt.model.hierarchy_attributes``) computed in
@@ -301,8 +301,9 @@ def build_hierarchy(
     ``method``: ``"sequential"`` (the default) makes the collapses one at a time, cheapest class first, in Warp
     kernels on ``workers`` threads, one mesh unit each (``lodprt.model.hierarchy_greedy.build_greedy``: the same
     costs, legality rules and node attributes, about 3 evaluations per collapse); ``"rounds"`` makes them in rounds
-    of parallel collapses ordered by the rounds' own QEM costs; ``"pymeshlab"`` replays pymeshlab's chained QEM halvings (``lodprt.model.hierarchy_pymeshlab``, on ``workers`` processes:
-    default every core) level by level with the same rounds, collapses and node attributes (docs/HIERARCHY.md).
+    of parallel collapses ordered by the rounds' own QEM costs; ``"pymeshlab"`` replays pymeshlab's chained QEM
+    halvings (``lodprt.model.hierarchy_pymeshlab``, on ``workers`` processes: default every core) level by level
+    with the same rounds, collapses and node attributes (docs/HIERARCHY.md).
     The round kernels, too, run on ``workers`` threads (default every core; ``KernelThreads``): each build gives the
     same hierarchy, bit for bit, on any number.
     """

@@ -25,7 +25,7 @@ import numpy as np
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.launches import warp_view
-from lodprt.model.hierarchy import Hierarchy
+from lodprt.model.hierarchy import Hierarchy, broken_link
 from lodprt.model.hierarchy_inputs import BOUNDARY_WEIGHT, CONE_SLACK, checked_inputs
 from lodprt.model.hierarchy_levels import mesh_groups
 from lodprt.model.hierarchy_rounds import EDGE_WEIGHT, FOLD_COS, MAX_VALENCE, SLIVER
@@ -230,17 +230,23 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report):
 
 def _compact(arr, node_of, at, node_base, made):
     """Move each unit's nodes (from ``node_base``, ``made`` of them, in increasing order) down to follow the earlier
-    units' (creation = node id) and fix the references to them (parents, children, the node at each vertex)."""
+    units' (creation = node id) and fix the references to them (parents, children, the node at each vertex). The
+    rows the move leaves behind get their parent and children cleared: a later phase's node written there takes
+    its parent only when it collapses, so a root of that phase would otherwise keep a stale one."""
     new_id = np.arange(len(arr["parent"]), dtype=np.int32)
+    end = at
     for src, n in zip(node_base, made):
         new_id[src:src + n] = np.arange(at, at + n, dtype=np.int32)
         for a in arr.values():
             if src != at:
                 a[at:at + n] = a[src:src + n]
         at += n
+        end = max(end, int(src) + n)
     for a in (arr["parent"], arr["children"], node_of):
         live = a >= 0
         a[live] = new_id[a[live]]
+    arr["parent"][at:end] = -1
+    arr["children"][at:end] = -1
     return at
 
 
@@ -327,6 +333,9 @@ def _hierarchy(kp, arr, N, V, nbs, rounds) -> Hierarchy:
     offsets = np.zeros(N + 1, np.int64)
     np.cumsum(arr["nb_count"][:N], out=offsets[1:])
     parent, children = arr["parent"][:N], arr["children"][:N]
+    broken = broken_link(parent, children, np.arange(N))
+    if broken is not None:
+        raise LodprtError(f"build_greedy: {broken} (an internal error)")
     half = np.minimum(arr["half"][:N] + CONE_SLACK, np.pi).astype(np.float32)
     half[:V] = 0
     leaf_order, leaf_range = np.zeros(V, np.int32), np.zeros((N, 2), np.int64)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.errors import StoreError
+from lodprt.errors import LodprtError, StoreError
 from lodprt.store.reader import read_array
 from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_format
 
@@ -243,9 +243,12 @@ class Store:
             raise StoreError(f"{self.path}: no hierarchy/ group (baked with --no-hierarchy)")
         g = self.root["hierarchy"]
         arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS}
-        return Hierarchy.from_arrays(arrays, levels=int(g.attrs.get("levels", 0)),
-                                     build_seconds=float(g.attrs.get("seconds", 0.0)),
-                                     method=str(g.attrs.get("method", "rounds")))
+        try:
+            return Hierarchy.from_arrays(arrays, levels=int(g.attrs.get("levels", 0)),
+                                         build_seconds=float(g.attrs.get("seconds", 0.0)),
+                                         method=str(g.attrs.get("method", "rounds")))
+        except LodprtError as e:
+            raise StoreError(f"{self.path}: hierarchy/: {e}") from None
 
     def info(self) -> dict:
         """The summary ``lodprt info --json`` prints."""
