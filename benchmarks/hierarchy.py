@@ -43,7 +43,7 @@ from common import environment, meshopt_halving, model, parser, plot_path, table
 
 FULL = ("bunny380", "spot", "fandisk")
 QUICK = ("bunny60",)
-#: the rounds build is timed this many times in its child, the best kept (``build s``); the others once
+#: the sequential and rounds builds are timed this many times in their child, the best kept (``build s``); the others once
 REPEATS = 3
 
 
