@@ -167,6 +167,37 @@ def test_tiles_then_their_borders_stay_legal(monkeypatch):
     assert abs(len(two.roots) - len(whole.roots)) <= 6, (len(two.roots), len(whole.roots))
 
 
+def radius_cut(h, faces, r):
+    """From the base, split (forced) every active node wider than ``r`` until none is: one level of detail over the
+    whole mesh, as a distant view asks for."""
+    cut = Cut.base(h, faces)
+    while True:
+        n = cut.nodes
+        wide = n[(h.radius[n] > r) & (h.children[n, 0] >= 0)]
+        if not len(wide):
+            return cut
+        cut.force_refine_many(wide)
+
+
+def test_tiles_stop_early_so_a_coarse_cut_costs_no_more_where_they_meet(monkeypatch):
+    """The first phase takes each tile to 1/REDUCE of its faces only, and the rest is built whole: the borders
+    collapse among the coarse levels, not after them. So a coarse cut of one level everywhere keeps about the
+    triangles of an untiled build. Built down to the base in the tiles instead (the former build, REDUCE huge),
+    the borders come last in creation order; splitting any tile node then needs its border neighbours split,
+    and the same cut keeps twice the triangles or more, along the borders."""
+    import lodprt.model.hierarchy_greedy as hg
+
+    pos, faces = wavy_grid(128)
+    whole = greedy(pos, faces)
+    monkeypatch.setattr(hg, "TILE", 2000)  # 9 tiles
+    tiled = greedy(pos, faces)
+    monkeypatch.setattr(hg, "REDUCE", 10**9)
+    former = greedy(pos, faces)
+    for r in (12.0, 16.0):
+        a, b, c = (len(radius_cut(h, faces, r).triangles()) for h in (whole, tiled, former))
+        assert b <= 1.3 * a and c >= 2 * a, (r, a, b, c)
+
+
 @pytest.mark.warp_debug
 def test_a_unit_out_of_neighbour_room_stops_with_a_clear_error(monkeypatch):
     """Each unit records neighbours in its own range; were the host's sizing ever short, the kernel writes nothing

@@ -8,10 +8,13 @@ evaluate every live vertex every round (docs/HIERARCHY.md, "The sequential build
 ``build_hierarchy`` (``method="sequential"``), ``bake`` and ``lodprt bake`` call it.
 
 Units are whole connected components (each holding its groups: split further by ``component``); a component with
-more than ``TILE`` movable vertices is first built in tiles of about that many, its tiles' borders waiting for a
-second phase over whole components. The units of a phase run on up to ``workers`` threads, the largest first, each
-thread taking the next unit when done (a CPU launch releases the GIL); they share no face or vertex they change and
-each writes its own node range, so the hierarchy is the same, bit for bit, on any number of threads.
+more than ``TILE`` movable vertices is first built in tiles of about that many, each down to 1/``REDUCE`` of its
+faces, its tiles' borders waiting for a second phase over whole components on the live mesh renumbered densely
+(docs/HIERARCHY.md: built down to the base in the tiles, the borders would come after every coarse level, and the
+run time's cut would keep them at full resolution). The units of a phase run on up to ``workers`` threads, the
+largest first, each thread taking the next unit when done (a CPU launch releases the GIL); they share no face or
+vertex they change and each writes its own node range, so the hierarchy is the same, bit for bit, on any number of
+threads.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ STRIDE = 40503
 #: a connected component with more movable vertices than this is first built in tiles of about this many, on
 #: several threads, their borders waiting for a second phase over the whole component
 TILE = 20_000
+#: the first phase stops each tile at 1/REDUCE of its faces, so that its borders collapse among the coarse levels
+REDUCE = 8
 
 
 def _inputs(positions, faces, normals, component, target_base):
@@ -70,6 +75,39 @@ def _mesh(kh, kp, pos, faces, group, keep_boundary):
     m.quadric = warp_view(np.zeros((V, 10)), wp.float64)
     wp.launch(kp.prepare, dim=1, inputs=[m, _scratch(kh, V), BOUNDARY_WEIGHT], device="cpu")
     return m
+
+
+def _compacted(kh, m, t, group):
+    """The second phase's mesh and state on the live part of the mesh, its vertices renumbered densely in id order
+    (after the tiles, the survivors lie scattered over the arrays; dense, they share cache lines): (Mesh, State,
+    the original id of each vertex). Carried: positions, flags, groups, quadrics, the node standing at each vertex
+    with its cone and radius; the corner lists are made anew over the live faces (each vertex's in corner order, as
+    ``prepare`` makes them); the per-round state starts afresh, as at every phase."""
+    wp = warp()
+    faces = m.faces.numpy()[m.alive.numpy().astype(bool)]
+    keep = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(group)))
+    new = np.full(len(group), -1, np.int32)
+    new[keep] = np.arange(len(keep), dtype=np.int32)
+    faces = new[faces]
+    V, corners = len(keep), faces.ravel()
+    order = np.argsort(corners, kind="stable").astype(np.int32)
+    same = corners[order[1:]] == corners[order[:-1]]
+    nxt = np.full(len(corners), -1, np.int32)
+    nxt[order[:-1][same]] = order[1:][same]
+    first = order[np.concatenate([[True], ~same])]
+    head = np.full(V, -1, np.int32)
+    head[corners[first]] = first
+    c = kh.Mesh()
+    c.pos, c.faces = warp_view(np.ascontiguousarray(m.pos.numpy()[keep]), wp.float64), warp_view(faces, wp.int32)
+    c.alive = warp_view(np.ones(len(faces), np.uint8), wp.uint8)
+    c.head, c.nxt = warp_view(head, wp.int32), warp_view(nxt, wp.int32)
+    for name in ("boundary", "frozen", "movable"):
+        setattr(c, name, warp_view(getattr(m, name).numpy()[keep], wp.uint8))
+    c.group, c.quadric = warp_view(group[keep], wp.int32), warp_view(m.quadric.numpy()[keep], wp.float64)
+    d = _state(kh, V, t.axis.numpy()[keep])
+    d.node_of = warp_view(t.node_of.numpy()[keep], wp.int32)
+    d.half, d.radius = warp_view(t.half.numpy()[keep], wp.float64), warp_view(t.radius.numpy()[keep], wp.float64)
+    return c, d, keep
 
 
 def _scratch(kh, V):
@@ -149,39 +187,40 @@ def _sizes(vunit, funit, movable):
 
 
 def _tiles(pos, faces, pieces, movable):
-    """The first phase's units when a connected component has more than ``TILE`` movable vertices, else None:
-    (F,) unit of each face (its component, or a cell of a grid over the component's two longest extents, by the
-    face's first corner) and (V,) unit of each vertex, -1 on the tiles' borders (faces in two units: they wait for the
-    second phase) and where no face is."""
+    """The first phase's units when a connected component has more than ``TILE`` movable vertices, else None: (F,)
+    unit of each face (a cell of a grid over its component's two longest extents, by the face's first corner; a
+    smaller component's faces keep its id, a unit that holds no vertex) and (V,) unit of each vertex, -1 where it
+    waits for the second phase (on the tiles' borders: faces in two units; in a smaller component; where no face
+    is)."""
     size = np.bincount(pieces[movable], minlength=int(pieces.max(initial=0)) + 1)
     big = np.flatnonzero(size > TILE)
     if not len(big):
         return None
-    funit = pieces[faces[:, 0]].astype(np.int64)
+    funit = pieces[faces[:, 0]]
     nxt = len(size)
     for g in big:
         sel = np.flatnonzero(funit == g)
         c = pos[faces[sel, 0]]  # a face's first corner places it
-        lo, ext = c.min(0), np.ptp(c, axis=0)
+        lo = np.array([c[:, d].min() for d in range(3)])  # column by column: numpy's min(0) strides slowly
+        ext = np.array([c[:, d].max() for d in range(3)]) - lo
         ax = np.argsort(-ext)[:2]
         k = -(-int(size[g]) // TILE)
         a = int(np.ceil(np.sqrt(k)))
         b = -(-k // a)
         i = np.clip(((c[:, ax[0]] - lo[ax[0]]) / max(ext[ax[0]], 1e-300) * a).astype(np.int64), 0, a - 1)
         j = np.clip(((c[:, ax[1]] - lo[ax[1]]) / max(ext[ax[1]], 1e-300) * b).astype(np.int64), 0, b - 1)
-        cell = i * b + j
-        funit[sel] = np.where(cell == 0, g, nxt + cell - 1)
-        nxt += a * b - 1
-    V = len(pos)
-    low, high = np.full(V, nxt, np.int64), np.full(V, -1, np.int64)
-    corner_unit = np.repeat(funit, 3)
-    np.minimum.at(low, faces.ravel(), corner_unit)
-    np.maximum.at(high, faces.ravel(), corner_unit)
-    vunit = np.where((high >= 0) & (low == high), high, -1)
-    return funit.astype(np.int32), vunit.astype(np.int32)
+        funit[sel] = nxt + i * b + j
+        nxt += a * b
+    vunit = np.full(len(pos), -1, np.int32)
+    for k in range(3):  # one of the vertex's units ...
+        vunit[faces[:, k]] = funit
+    for k in range(3):  # ... -1 where its faces lie in two
+        vunit[faces[funit != vunit[faces[:, k]], k]] = -1
+    vunit[vunit < len(size)] = -1  # a smaller component waits for the second phase
+    return funit, vunit
 
 
-def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report):
+def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, reduce=0):
     """One phase: a launch per unit of ``units`` ((V,) unit of each vertex, -1: it stays; (F,) unit of each face),
     the largest first, on up to ``workers`` threads that each take the next unit when done; each unit stops at
     ``target_base`` faces of ``counters`` ((V,) the counter of each vertex, (F,) of each face). Units share no face
@@ -205,6 +244,10 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report):
     m.group_faces = warp_view(np.bincount(fcount[alive], minlength=int(fcount.max(initial=0)) + 1).astype(np.int32),
                               wp.int32)
     unit_wp = warp_view(vunit, wp.int32)
+    stop = np.full(len(moves), int(target_base), np.int64)
+    if reduce:
+        held = m.group_faces.numpy()
+        stop[:len(held)] = np.maximum(stop[:len(held)], held[:len(stop)] // reduce)
     for a in (t.used, t.used_u, t.wait_v, t.wait_vr, t.wait_u, t.wait_ur):  # rounds count from 0 again
         a.numpy().fill(-1)
     ctrs = {u: _counters(kh, nb_base[u], entries[u]) for u in todo}
@@ -212,7 +255,7 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report):
     def launch(s, q, u):
         q.ctr = warp_view(ctrs[u], wp.int64)
         wp.launch(kh.greedy_build, dim=1, device="cpu", inputs=[m, s, q, t, nd, unit_wp, u, int(node_base[u]),
-                                                                int(target_base), EDGE_WEIGHT, FOLD_COS, SLIVER,
+                                                                int(stop[u]), EDGE_WEIGHT, FOLD_COS, SLIVER,
                                                                 MAX_VALENCE])
         done.append(u)
 
@@ -270,23 +313,32 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     t = _state(kh, V, nrm)
     movable = m.movable.numpy().astype(bool)
     nd_arr = _nodes(kh, V, nrm, int(movable.sum()))
-    tiles = _tiles(pos, work, pieces, movable)
-    whole = (pieces.astype(np.int32), pieces[work[:, 0]].astype(np.int32))
-    phases = [(whole, (group, group[work[:, 0]]))]
-    if tiles is not None:  # tiles first (each its own counter), their borders waiting; then whole components
-        phases.insert(0, ((tiles[1], tiles[0]), (tiles[1], tiles[0])))
     at, recorded, rounds = V, [], 0
     total = int(movable.sum())
-    for units, counters in phases:
+
+    def phase(m, t, units, counters, reduce=0):
+        nonlocal at, rounds
         before = at - V
 
-        def report(made, before=before):
+        def report(made):
             if progress is not None:
                 progress(before + made, total)
 
-        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report)
-        recorded += rec
+        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, reduce)
+        recorded.extend(rec)
         rounds += r
+
+    tiles = _tiles(pos, work, pieces, movable)
+    if tiles is None:  # whole components, each group to target_base
+        phase(m, t, (pieces, pieces[work[:, 0]]), (group, group[work[:, 0]]))
+    else:  # each tile to 1/REDUCE of its faces (its own counter), its borders waiting; then the rest, dense
+        phase(m, t, (tiles[1], tiles[0]), (tiles[1], tiles[0]), REDUCE)
+        c, d, keep = _compacted(kh, m, t, group)
+        first, done = at, len(recorded)
+        cf = c.faces.numpy()
+        phase(c, d, (pieces[keep], pieces[keep][cf[:, 0]]), (group[keep], group[keep][cf[:, 0]]))
+        nd_arr[1]["vertex"][first:at] = keep[nd_arr[1]["vertex"][first:at]]  # the original vertex ids
+        recorded[done:] = [keep[r] for r in recorded[done:]]
     h = _hierarchy(kp, nd_arr[1], at, V, np.concatenate(recorded), rounds)
     h.build_seconds = time.perf_counter() - t0
     return h
