@@ -316,6 +316,7 @@ def record(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, v: int, u: int, n
     b = t.node_of[v]
     nd.parent[a] = k
     nd.parent[b] = k
+    nd.parent[k] = -1  # a root until it collapses (the row may hold an earlier phase's node: the host clears those too)
     nd.children[k, 0] = a
     nd.children[k, 1] = b
     nd.vertex[k] = u
@@ -443,6 +444,9 @@ def greedy_build(
     nd: Nodes,  # Out: nodes node_base.. of this unit, its neighbours from q.ctr[2]
     part: wp.array(dtype=wp.int32),  # In: (V,) the unit of each vertex (-1: it waits for a later phase)
     me: int,  # In: this launch's unit
+    members: wp.array(dtype=wp.int32),  # In: the vertices of every unit, unit after unit, ids ascending in each
+    first: int,  # In: where this unit's vertices start in members ...
+    count: int,  # In: ... and how many they are
     node_base: int,  # In: id of this unit's first node
     target_base: int,  # In: a group stops once it has at most this many faces
     edge_weight: wp.float64,  # In: weight of |uv|^4 in the cost
@@ -451,10 +455,13 @@ def greedy_build(
     max_valence: int,  # In: largest valence of a survivor
 ):
     V = m.pos.shape[0]
-    for v in range(V):  # every movable vertex starts unevaluated (class 0), in the queue's order
-        if m.movable[v] != wp.uint8(0) and part[v] == me and t.dead[v] == wp.uint8(0):
-            t.pending[v] = wp.uint8(1)
-            push(q, wp.float64(-1.0), v, t.version[v], 0)
+    start = wp.clamp(first, 0, members.shape[0])
+    for i in range(start, wp.min(start + count, members.shape[0])):  # every movable vertex starts unevaluated
+        v = members[i]  # (class 0), in the queue's order
+        if v >= 0 and v < V:
+            if m.movable[v] != wp.uint8(0) and part[v] == me and t.dead[v] == wp.uint8(0):
+                t.pending[v] = wp.uint8(1)
+                push(q, wp.float64(-1.0), v, t.version[v], 0)
     st = wp.max(V, s.stamp[0])  # above every stamp ``prepare`` (vertex ids) or an earlier launch left in s.seen
     while True:
         r, v = pop(q)

@@ -268,7 +268,13 @@ def map_faces(h: Hierarchy, faces: np.ndarray, anc: np.ndarray) -> tuple[np.ndar
     """Faces (F, 3) mapped through each vertex's active ancestor to original vertex ids (int32), and (F,) bool:
     not degenerate (three different vertices)."""
     f = h.vertex[anc[np.asarray(faces, np.int64)]].astype(np.int32)
-    return f, (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+    return f, distinct_corners(f)
+
+
+def distinct_corners(f: np.ndarray) -> np.ndarray:
+    """(F,) bool: the face's three corners are three different vertices (a face with a repeated corner has no
+    area and takes no part in a collapse)."""
+    return (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
 
 
 def vertex_corners(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

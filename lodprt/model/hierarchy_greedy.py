@@ -28,7 +28,7 @@ import numpy as np
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.launches import warp_view
-from lodprt.model.hierarchy import Hierarchy, broken_link
+from lodprt.model.hierarchy import Hierarchy, broken_link, distinct_corners
 from lodprt.model.hierarchy_inputs import BOUNDARY_WEIGHT, CONE_SLACK, checked_inputs
 from lodprt.model.hierarchy_levels import mesh_groups
 from lodprt.model.hierarchy_rounds import EDGE_WEIGHT, FOLD_COS, MAX_VALENCE, SLIVER
@@ -50,7 +50,7 @@ def _inputs(positions, faces, normals, component, target_base):
     within one) and connected components (the units); ``checked_inputs`` refuses bad input."""
     pos, f, nrm, comp = checked_inputs("build_greedy", positions, faces, normals, component, target_base)
     V = len(pos)
-    f = np.ascontiguousarray(f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])])
+    f = np.ascontiguousarray(f[distinct_corners(f)])
     pieces = mesh_groups(V, f).astype(np.int32)
     group = pieces if comp is None else mesh_groups(V, f, comp).astype(np.int32)
     return pos, f, nrm, group, pieces
@@ -244,6 +244,9 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, 
     m.group_faces = warp_view(np.bincount(fcount[alive], minlength=int(fcount.max(initial=0)) + 1).astype(np.int32),
                               wp.int32)
     unit_wp = warp_view(vunit, wp.int32)
+    members = np.argsort(vunit, kind="stable").astype(np.int32)  # each unit's vertices, ids ascending
+    starts = np.searchsorted(vunit[members], np.arange(len(moves) + 1))
+    members_wp = warp_view(members, wp.int32)
     stop = np.full(len(moves), int(target_base), np.int64)
     if reduce:
         held = m.group_faces.numpy()
@@ -254,9 +257,9 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, 
 
     def launch(s, q, u):
         q.ctr = warp_view(ctrs[u], wp.int64)
-        wp.launch(kh.greedy_build, dim=1, device="cpu", inputs=[m, s, q, t, nd, unit_wp, u, int(node_base[u]),
-                                                                int(stop[u]), EDGE_WEIGHT, FOLD_COS, SLIVER,
-                                                                MAX_VALENCE])
+        wp.launch(kh.greedy_build, dim=1, device="cpu",
+                  inputs=[m, s, q, t, nd, unit_wp, u, members_wp, int(starts[u]), int(starts[u + 1] - starts[u]),
+                          int(node_base[u]), int(stop[u]), EDGE_WEIGHT, FOLD_COS, SLIVER, MAX_VALENCE])
         done.append(u)
 
     done = []
@@ -334,6 +337,7 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     else:  # each tile to 1/REDUCE of its faces (its own counter), its borders waiting; then the rest, dense
         phase(m, t, (tiles[1], tiles[0]), (tiles[1], tiles[0]), REDUCE)
         c, d, keep = _compacted(kh, m, t, group)
+        m = t = None  # the full-size mesh and state are done with (memory)
         first, done = at, len(recorded)
         cf = c.faces.numpy()
         phase(c, d, (pieces[keep], pieces[keep][cf[:, 0]]), (group[keep], group[keep][cf[:, 0]]))

@@ -21,6 +21,7 @@ import numpy as np
 
 from lodprt.devices import warp
 from lodprt.launches import DEVICE, KernelThreads, warp_view
+from lodprt.model.hierarchy import distinct_corners
 
 #: a moved face must keep its normal within this cosine of its old one (0 = 90 degrees)
 FOLD_COS = 0.0
@@ -244,8 +245,7 @@ class CollapseRounds:
         to = np.arange(self.n, dtype=np.int32)
         to[v] = u
         f = to[self.faces]
-        keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
-        self.faces = f[keep]
+        self.faces = f[distinct_corners(f)]
         wp = warp()
         from lodprt.kernels import hierarchy as kh
 
