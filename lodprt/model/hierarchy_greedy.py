@@ -223,7 +223,8 @@ def _tiles(pos, faces, pieces, movable):
 def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, reduce=0):
     """One phase: a launch per unit of ``units`` ((V,) unit of each vertex, -1: it stays; (F,) unit of each face),
     the largest first, on up to ``workers`` threads that each take the next unit when done; each unit stops at
-    ``target_base`` faces of ``counters`` ((V,) the counter of each vertex, (F,) of each face). Units share no face
+    ``target_base`` faces of ``counters`` ((V,) the counter of each vertex, (F,) of each face), or with ``reduce`` at
+    1/``reduce`` of the faces its counter holds when that is more (a tile: its counter is its own). Units share no face
     or vertex they change, and each has its own node and neighbour range, so the result does not depend on the
     threads. ``report(collapses)`` is called with the collapses of the units done so far, in the calling thread. The
     nodes are compacted from node ``at``; returns the next free node, the recorded neighbours and the most rounds of
