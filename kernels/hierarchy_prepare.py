@@ -1,5 +1,6 @@
 """Before and after the sequential hierarchy build (``lodprt.kernels.hierarchy_greedy``, tag H-G), one Warp thread
-each: ``prepare`` (corner lists, Garland-Heckbert quadrics, boundary and non-manifold flags, boundary planes: what
+each: ``components`` (the mesh's groups: connected components, split by a label, by union-find),
+``prepare`` (corner lists, Garland-Heckbert quadrics, boundary and non-manifold flags, boundary planes: what
 ``lodprt.model.hierarchy_build`` computes for the rounds build) and ``leaf_layout`` (the hierarchy's depth-first
 leaf order for a tree whose children precede their parents). Loops are bounded by the arrays' shapes.
 """
@@ -10,6 +11,49 @@ from lodprt.kernels.hierarchy import vec_at
 from lodprt.kernels.hierarchy_greedy import CAP, Mesh, Scratch, gather
 
 wp.set_module_options({"enable_backward": False, "optimization_level": 3})
+
+
+@wp.func
+def find(root: wp.array(dtype=wp.int32), x: int):
+    """The root of x's set, halving the path on the way (every link points to a smaller id: the root is the set's
+    smallest member)."""
+    while root[x] != x:
+        root[x] = root[root[x]]
+        x = root[x]
+    return x
+
+
+@wp.kernel
+def components(
+    faces: wp.array2d(dtype=wp.int32),  # In: (F, 3) vertex ids, each in [0, V)
+    label: wp.array(dtype=wp.int32),  # In: (V,) edges join only vertices of the same label (unread when split 0)
+    split: int,  # In: 1 reads label, 0 joins every edge
+    root: wp.array(dtype=wp.int32),  # Temp: (V,)
+    group: wp.array(dtype=wp.int32),  # Out: (V,) group of each vertex, numbered in the order of their smallest id
+):
+    V = root.shape[0]
+    for v in range(V):
+        root[v] = v
+    for f in range(faces.shape[0]):
+        for j in range(3):
+            a = faces[f, j]
+            b = faces[f, (j + 1) % 3]
+            if split != 0 and label[a] != label[b]:
+                continue
+            ra = find(root, a)
+            rb = find(root, b)
+            if ra < rb:  # the larger root joins the smaller, which stays its set's smallest member
+                root[rb] = ra
+            elif rb < ra:
+                root[ra] = rb
+    n = int(0)
+    for v in range(wp.min(V, group.shape[0])):
+        r = find(root, v)
+        if r == v:  # v is its group's smallest member, met before the others
+            group[v] = n
+            n += 1
+        else:
+            group[v] = group[r]
 
 
 @wp.func

@@ -249,3 +249,40 @@ def test_the_default_build_reports_progress_in_the_calling_thread(monkeypatch, w
     assert {c[1] for c in calls} == {len(pos)}  # every vertex of the open grids may move
     assert done == sorted(done) and done[-1] == h.num_nodes - len(pos) <= len(pos)
     assert {c[2] for c in calls} == {threading.get_ident()}
+
+
+def scipy_groups(V, faces, component=None):
+    """The oracle: scipy's connected components of the face edges (those within one ``component`` value)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    if component is not None:
+        e = e[component[e[:, 0]] == component[e[:, 1]]]
+    g = coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(V, V))
+    return connected_components(g, directed=False)[1]
+
+
+@pytest.mark.warp_debug
+def test_mesh_groups_union_find_matches_scipy_connected_components():
+    """``mesh_groups`` (the ``components`` union-find kernel) gives scipy's labels exactly, numbered by smallest
+    vertex: random meshes with isolated vertices, repeated corners and a ``component`` split (small labels, labels
+    past int32, negative ones); no faces; and a refused face index past the vertices."""
+    from hypothesis import given, settings, strategies as st
+
+    from lodprt.model.hierarchy_levels import mesh_groups
+
+    @settings(max_examples=60, deadline=None)
+    @given(st.integers(1, 40), st.integers(0, 50), st.sampled_from([None, 3, 2**40, -5]), st.integers(0, 2**31))
+    def check(V, F, labels, seed):
+        rng = np.random.default_rng(seed)
+        faces = rng.integers(0, V, (F, 3))
+        comp = None if labels is None else rng.integers(0, 3, V) * (labels if labels != 3 else 1)
+        got = mesh_groups(V, faces, comp)
+        np.testing.assert_array_equal(got, scipy_groups(V, faces.reshape(-1, 3), comp))
+
+    check()
+    pos, faces = two_grids()
+    np.testing.assert_array_equal(mesh_groups(len(pos), faces), scipy_groups(len(pos), faces))
+    with pytest.raises(LodprtError, match="outside"):
+        mesh_groups(3, np.array([[0, 1, 3]]))

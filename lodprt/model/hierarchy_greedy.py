@@ -8,7 +8,7 @@ evaluate every live vertex every round (docs/HIERARCHY.md, "The sequential build
 ``build_hierarchy`` (``method="sequential"``), ``bake`` and ``lodprt bake`` call it.
 
 Units are whole connected components (each holding its groups: split further by ``component``); a component with
-more than ``TILE`` movable vertices is first built in tiles of about that many, each down to 1/``REDUCE`` of its
+more than ``TILE`` used vertices is first built in tiles of about that many, each down to 1/``REDUCE`` of its
 faces, its tiles' borders waiting for a second phase over whole components on the live mesh renumbered densely
 (docs/HIERARCHY.md: built down to the base in the tiles, the borders would come after every coarse level, and the
 run time's cut would keep them at full resolution). The units of a phase run on up to ``workers`` threads, the
@@ -19,6 +19,7 @@ threads.
 
 from __future__ import annotations
 
+import concurrent.futures
 import os
 import threading
 import time
@@ -38,7 +39,7 @@ from lodprt.model.hierarchy_rounds import EDGE_WEIGHT, FOLD_COS, MAX_VALENCE, SL
 BLOCK = 1024
 #: a prime far from any block count (the stride of the blocks' permutation)
 STRIDE = 40503
-#: a connected component with more movable vertices than this is first built in tiles of about this many, on
+#: a connected component with more used vertices than this is first built in tiles of about this many, on
 #: several threads, their borders waiting for a second phase over the whole component
 TILE = 20_000
 #: the first phase stops each tile at 1/REDUCE of its faces, so that its borders collapse among the coarse levels
@@ -46,18 +47,20 @@ REDUCE = 8
 
 
 def _inputs(positions, faces, normals, component, target_base):
-    """float64 positions, int32 faces without repeated corners, unit float64 normals, int32 groups (moves stay
-    within one) and connected components (the units); ``checked_inputs`` refuses bad input."""
+    """float64 positions, int32 faces without repeated corners, unit float64 normals and the ``component`` labels
+    (or None); ``checked_inputs`` refuses bad input."""
     pos, f, nrm, comp = checked_inputs("build_greedy", positions, faces, normals, component, target_base)
-    V = len(pos)
-    f = np.ascontiguousarray(f[distinct_corners(f)])
-    pieces = mesh_groups(V, f).astype(np.int32)
-    group = pieces if comp is None else mesh_groups(V, f, comp).astype(np.int32)
-    return pos, f, nrm, group, pieces
+    return pos, np.ascontiguousarray(f[distinct_corners(f)]), nrm, comp
 
 
-def _mesh(kh, kp, pos, faces, group, keep_boundary):
-    """The kernels' Mesh, its corner lists, quadrics and flags made by ``prepare``."""
+def _groups(V, faces, comp):
+    """int32 groups (moves stay within one) and connected components (the units) of the V vertices."""
+    pieces = mesh_groups(V, faces).astype(np.int32)
+    return (pieces if comp is None else mesh_groups(V, faces, comp).astype(np.int32)), pieces
+
+
+def _mesh(kh, pos, faces, keep_boundary):
+    """The kernels' Mesh before ``prepare`` (``_prepared``) makes its corner lists, quadrics and flags."""
     wp = warp()
     V, F = len(pos), len(faces)
     m = kh.Mesh()
@@ -68,13 +71,34 @@ def _mesh(kh, kp, pos, faces, group, keep_boundary):
     movable[faces.ravel()] = 2 if keep_boundary else 1
     m.movable = warp_view(movable, wp.uint8)
     m.boundary, m.frozen = warp_view(np.zeros(V, np.uint8), wp.uint8), warp_view(np.zeros(V, np.uint8), wp.uint8)
+    m.quadric = warp_view(np.zeros((V, 10)), wp.float64)
+    return m
+
+
+def _prepared(kh, kp, m, background):
+    """Launch ``prepare`` on ``m`` (on a thread of its own with ``background``, while the caller goes on with the
+    groups and tiles, which do not read what it writes); returns the call that waits for it."""
+    wp = warp()
+
+    def run():
+        wp.launch(kp.prepare, dim=1, inputs=[m, _scratch(kh, m.pos.shape[0]), BOUNDARY_WEIGHT], device="cpu")
+
+    if not background:
+        run()
+        return lambda: None
+    pool = concurrent.futures.ThreadPoolExecutor(1)
+    job = pool.submit(run)
+    pool.shutdown(wait=False)
+    return job.result  # re-raises the launch's error in the caller
+
+
+def _set_groups(m, faces, group):
+    """The Mesh's groups: of each vertex, of each face (its first corner's) and each group's face count."""
+    wp = warp()
+    G = int(group.max()) + 1 if len(group) else 1
     m.group = warp_view(group, wp.int32)
-    G = int(group.max()) + 1 if V else 1
     m.face_group, m.count_group = warp_view(group[faces[:, 0]], wp.int32), warp_view(group, wp.int32)
     m.group_faces = warp_view(np.bincount(group[faces[:, 0]], minlength=G).astype(np.int32), wp.int32)
-    m.quadric = warp_view(np.zeros((V, 10)), wp.float64)
-    wp.launch(kp.prepare, dim=1, inputs=[m, _scratch(kh, V), BOUNDARY_WEIGHT], device="cpu")
-    return m
 
 
 def _compacted(kh, m, t, group):
@@ -186,13 +210,14 @@ def _sizes(vunit, funit, movable):
     return moves, moves * MAX_VALENCE + np.bincount(funit, minlength=U) * 6
 
 
-def _tiles(pos, faces, pieces, movable):
-    """The first phase's units when a connected component has more than ``TILE`` movable vertices, else None: (F,)
+def _tiles(pos, faces, pieces, used):
+    """The first phase's units when a connected component has more than ``TILE`` vertices that faces use (``used``;
+    known before ``prepare`` has found which may move), else None: (F,)
     unit of each face (a cell of a grid over its component's two longest extents, by the face's first corner; a
     smaller component's faces keep its id, a unit that holds no vertex) and (V,) unit of each vertex, -1 where it
     waits for the second phase (on the tiles' borders: faces in two units; in a smaller component; where no face
     is)."""
-    size = np.bincount(pieces[movable], minlength=int(pieces.max(initial=0)) + 1)
+    size = np.bincount(pieces[used], minlength=int(pieces.max(initial=0)) + 1)
     big = np.flatnonzero(size > TILE)
     if not len(big):
         return None
@@ -220,9 +245,10 @@ def _tiles(pos, faces, pieces, movable):
     return funit, vunit
 
 
-def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, reduce=0):
+def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, pieces, reduce=0):
     """One phase: a launch per unit of ``units`` ((V,) unit of each vertex, -1: it stays; (F,) unit of each face),
-    the largest first, on up to ``workers`` threads that each take the next unit when done; each unit stops at
+    on up to ``workers`` threads that each take the unit of the longest estimated time left when done (``_run``;
+    ``pieces``: (V,) the connected component of each vertex, a unit's kind); each unit stops at
     ``target_base`` faces of ``counters`` ((V,) the counter of each vertex, (F,) of each face), or with ``reduce`` at
     1/``reduce`` of the faces its counter holds when that is more (a tile: its counter is its own). Units share no face
     or vertex they change, and each has its own node and neighbour range, so the result does not depend on the
@@ -245,7 +271,8 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, 
     m.group_faces = warp_view(np.bincount(fcount[alive], minlength=int(fcount.max(initial=0)) + 1).astype(np.int32),
                               wp.int32)
     unit_wp = warp_view(vunit, wp.int32)
-    members = np.argsort(vunit, kind="stable").astype(np.int32)  # each unit's vertices, ids ascending
+    key = vunit.astype(np.int16) if len(moves) < 2**15 else vunit  # 16 bits: numpy's stable sort is a radix sort
+    members = np.argsort(key, kind="stable").astype(np.int32)  # each unit's vertices, ids ascending
     starts = np.searchsorted(vunit[members], np.arange(len(moves) + 1))
     members_wp = warp_view(members, wp.int32)
     stop = np.full(len(moves), int(target_base), np.int64)
@@ -264,8 +291,9 @@ def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, 
         done.append(u)
 
     done = []
+    kind = {u: int(pieces[members[starts[u]]]) for u in todo}
     _run(lambda: (_scratch(kh, V), _queue(kh, V)), launch, todo, workers,
-         lambda: report(sum(int(ctrs[u][1]) for u in list(done))))
+         lambda: report(sum(int(ctrs[u][1]) for u in list(done))), size=moves, kind=kind)
     if any(c[5] for c in ctrs.values()):
         raise LodprtError("build_greedy: neighbour space exhausted (an internal sizing error)")
     nbs = nd.nbs.numpy()
@@ -310,17 +338,25 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     from lodprt.kernels import hierarchy_prepare as kp
 
     t0 = time.perf_counter()
-    pos, work, nrm, group, pieces = _inputs(positions, faces, normals, component, target_base)
+    pos, work, nrm, comp = _inputs(positions, faces, normals, component, target_base)
     V = len(pos)
+    workers = _workers(workers)
     load_kernels("cpu", kh, kp)
-    m = _mesh(kh, kp, pos, work, group, keep_boundary)
+    m = _mesh(kh, pos, work, keep_boundary)
+    prepared = _prepared(kh, kp, m, workers > 1)  # on its own thread while the groups and tiles are found
+    group, pieces = _groups(V, work, comp)
+    used = np.zeros(V, bool)
+    used[work.ravel()] = True
+    tiles = _tiles(pos, work, pieces, used)
+    prepared()
+    _set_groups(m, work, group)
     t = _state(kh, V, nrm)
     movable = m.movable.numpy().astype(bool)
     nd_arr = _nodes(kh, V, nrm, int(movable.sum()))
     at, recorded, rounds = V, [], 0
     total = int(movable.sum())
 
-    def phase(m, t, units, counters, reduce=0):
+    def phase(m, t, units, counters, pieces, reduce=0):
         nonlocal at, rounds
         before = at - V
 
@@ -328,20 +364,19 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
             if progress is not None:
                 progress(before + made, total)
 
-        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, reduce)
+        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, pieces, reduce)
         recorded.extend(rec)
         rounds += r
 
-    tiles = _tiles(pos, work, pieces, movable)
     if tiles is None:  # whole components, each group to target_base
-        phase(m, t, (pieces, pieces[work[:, 0]]), (group, group[work[:, 0]]))
+        phase(m, t, (pieces, pieces[work[:, 0]]), (group, group[work[:, 0]]), pieces)
     else:  # each tile to 1/REDUCE of its faces (its own counter), its borders waiting; then the rest, dense
-        phase(m, t, (tiles[1], tiles[0]), (tiles[1], tiles[0]), REDUCE)
+        phase(m, t, (tiles[1], tiles[0]), (tiles[1], tiles[0]), pieces, REDUCE)
         c, d, keep = _compacted(kh, m, t, group)
         m = t = None  # the full-size mesh and state are done with (memory)
         first, done = at, len(recorded)
         cf = c.faces.numpy()
-        phase(c, d, (pieces[keep], pieces[keep][cf[:, 0]]), (group[keep], group[keep][cf[:, 0]]))
+        phase(c, d, (pieces[keep], pieces[keep][cf[:, 0]]), (group[keep], group[keep][cf[:, 0]]), pieces[keep])
         nd_arr[1]["vertex"][first:at] = keep[nd_arr[1]["vertex"][first:at]]  # the original vertex ids
         recorded[done:] = [keep[r] for r in recorded[done:]]
     h = _hierarchy(kp, nd_arr[1], at, V, np.concatenate(recorded), rounds)
@@ -349,15 +384,32 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     return h
 
 
-def _run(make, launch, todo, workers, after):
-    """``launch(*make(), unit)`` for every unit of ``todo``, in order, on up to ``workers`` threads (default: every
-    core this process may use; a CPU launch releases the GIL), each with its own ``make()`` (scratch, queue);
-    ``after()`` in the calling thread after each of its units and at the end."""
+def _workers(workers):
+    """The threads a phase may use: ``workers``, or by default every core this process may use."""
     if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return int(workers)
+
+
+def _run(make, launch, todo, workers, after, size=None, kind=None):
+    """``launch(*make(), unit)`` for every unit of ``todo`` on up to ``workers`` threads (a CPU launch releases the
+    GIL), each with its own ``make()`` (scratch, queue); ``after()`` in the calling thread after each of its units and
+    at the end. A free thread takes the first unit of ``todo`` left, or with ``size`` and ``kind`` (unit -> its
+    collapses, and the component it lies in) the one of the longest estimated time: its size times the seconds per
+    collapse its kind's finished units took (a kind with none finished yet: the slowest rate known), so that a costly
+    kind's last tiles do not start last and keep one thread busy alone at the end. Each unit's result does not depend
+    on the order."""
     left = list(todo)
     lock = threading.Lock()
     failed = []
+    rate = {}  # kind -> [seconds, collapses] of its finished units
+
+    def take():
+        if size is None or len(left) < 2:
+            return left.pop(0)
+        slowest = max((sec / max(n, 1) for sec, n in rate.values()), default=1.0)
+        est = [size[u] * (rate[kind[u]][0] / max(rate[kind[u]][1], 1) if kind[u] in rate else slowest) for u in left]
+        return left.pop(int(np.argmax(est)))  # ties: the first, the largest
 
     def work(caller=False):
         own = make()
@@ -365,9 +417,14 @@ def _run(make, launch, todo, workers, after):
             with lock:
                 if not left or failed:
                     return
-                u = left.pop(0)
+                u = take()
             try:
+                t = time.perf_counter()
                 launch(*own, u)
+                if size is not None:
+                    with lock:
+                        r = rate.setdefault(kind[u], [0.0, 0])
+                        r[0], r[1] = r[0] + time.perf_counter() - t, r[1] + int(size[u])
             except BaseException as e:  # noqa: BLE001 (re-raised in the calling thread)
                 failed.append(e)
                 return
