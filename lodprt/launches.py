@@ -6,14 +6,20 @@ its own items' outputs, so the result is what one launch gives.
   collapse rounds, the completion plan's weights, the run time's per-sample bounds and direct light);
 * ``launch_ranges``: one contiguous range per thread, or one launch on CUDA (the transfer, volume and neighbourhood
   bakes);
+* ``run_jobs``: jobs of unequal, unknown cost (the sequential hierarchy build's tiles and components), some waiting
+  for others, on a few threads, the longest estimated first;
 * ``warp_view``: a zero-copy Warp view of a CPU numpy array.
 """
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import os
 import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -125,3 +131,97 @@ def launch_ranges(kernel, n: int, device: str, inputs_for, jobs: int | None) -> 
 
     with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
         list(pool.map(run, range(jobs)))
+
+
+@dataclass
+class Job:
+    """One job of ``run_jobs``: ``run(cache)`` does it (``cache``: a dict of its thread's own, kept between the
+    thread's jobs); ``size`` its work in any unit, ``follow`` the size of the work waiting for it; jobs of one
+    ``kind`` share a measured rate (seconds per size unit); it waits for ``waits`` jobs, and ``then`` lists the
+    indices of the jobs that wait for it."""
+
+    run: Callable[[dict], None]
+    size: float
+    kind: object = None
+    follow: float = 0.0
+    waits: int = 0
+    then: list = field(default_factory=list)
+
+
+def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: None) -> None:
+    """Run ``jobs`` on this thread and ``workers - 1`` more (a CPU launch releases the GIL): a free thread takes the
+    ready job (none left to wait for) of the longest estimated time, ``(size + follow)`` times its kind's rate so far
+    (a kind none of whose jobs has finished: the slowest rate known; ties: the first in ``jobs``), so that a costly
+    kind's last jobs do not start last and keep one thread busy alone, and the work behind a long chain starts
+    early; but first, the largest job of each kind of several jobs none of which has run yet, so that its rate is
+    measured before the rest of that kind is placed. ``after()`` runs in the calling thread after each of its jobs and at the end; the first error stops the
+    rest and is raised here. The jobs must not depend on the order they run in."""
+    lock = threading.Condition()
+    ready = [k for k, j in enumerate(jobs) if j.waits == 0]
+    waits = [j.waits for j in jobs]
+    left, failed, rate, running = len(jobs), [], {}, [0]
+
+    jobs_of = collections.Counter(j.kind for j in jobs)
+    busy = collections.Counter()  # kind -> its jobs running
+
+    def take():
+        slowest = max((sec / max(n, 1e-300) for sec, n in rate.values()), default=1.0)
+        est = np.array([(jobs[k].size + jobs[k].follow) * (rate[jobs[k].kind][0] / max(rate[jobs[k].kind][1], 1e-300)
+                                                           if jobs[k].kind in rate else slowest) for k in ready])
+        # a kind of several jobs none of which has run yet goes first: its rate is then known for the others
+        probe = np.array([jobs_of[jobs[k].kind] > 1 and jobs[k].kind not in rate and not busy[jobs[k].kind]
+                          for k in ready])
+        k = ready.pop(int(np.argmax(np.where(probe, est, -1.0) if probe.any() else est)))
+        busy[jobs[k].kind] += 1
+        return k
+
+    def work(caller=False):
+        nonlocal left
+        cache = {}
+        while True:
+            with lock:
+                while not ready and left and not failed:
+                    if not running[0]:  # nothing runs that could release a job: a cycle of waits
+                        failed.append(RuntimeError("run_jobs: the jobs left wait for each other"))
+                        lock.notify_all()
+                        break
+                    lock.wait()
+                if not left or failed:
+                    return
+                k = take()
+                running[0] += 1
+            t = time.perf_counter()
+            try:
+                jobs[k].run(cache)
+            except BaseException as e:  # noqa: BLE001 (raised in the calling thread)
+                with lock:
+                    running[0] -= 1
+                    failed.append(e)
+                    lock.notify_all()
+                return
+            with lock:
+                running[0] -= 1
+                busy[jobs[k].kind] -= 1
+                r = rate.setdefault(jobs[k].kind, [0.0, 0.0])
+                r[0], r[1] = r[0] + time.perf_counter() - t, r[1] + float(jobs[k].size)
+                left -= 1
+                for d in jobs[k].then:
+                    waits[d] -= 1
+                    if waits[d] == 0:
+                        ready.append(d)
+                ready.sort()
+                lock.notify_all()
+            if caller:
+                after()
+
+    threads = [threading.Thread(target=work) for _ in range(max(1, min(int(workers), len(jobs))) - 1)]
+    for th in threads:
+        th.start()
+    try:
+        work(caller=True)
+    finally:
+        for th in threads:
+            th.join()
+    if failed:
+        raise failed[0]
+    after()

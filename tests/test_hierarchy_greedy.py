@@ -167,6 +167,41 @@ def test_tiles_then_their_borders_stay_legal(monkeypatch):
     assert abs(len(two.roots) - len(whole.roots)) <= 6, (len(two.roots), len(whole.roots))
 
 
+def test_the_same_hierarchy_whatever_order_the_jobs_run_in(monkeypatch):
+    """The tiles and each component's second phase are jobs (``run_jobs``): run one at a time in the reverse of any
+    order the pool would pick (the last ready job first), the hierarchy is the pool's, array for array; and each
+    component's second phase ran before the other component's tiles were all done."""
+    import lodprt.model.hierarchy_greedy as hg
+
+    pos, faces = two_grids()
+    monkeypatch.setattr(hg, "TILE", 60)
+    pooled = greedy(pos, faces, workers=2)
+    ran = []
+
+    def reverse(jobs, workers, after=lambda: None):
+        waits = [j.waits for j in jobs]
+        ready = [k for k, w in enumerate(waits) if w == 0]
+        while ready:
+            k = ready.pop()  # the last ready job first
+            jobs[k].run({})
+            ran.append(k)
+            for d in jobs[k].then:
+                waits[d] -= 1
+                if not waits[d]:
+                    ready.append(d)
+        assert len(ran) == len(jobs)
+        after()
+
+    monkeypatch.setattr(hg, "run_jobs", reverse)
+    other = greedy(pos, faces, workers=2)
+    for name in pooled.ARRAYS:
+        np.testing.assert_array_equal(getattr(pooled, name), getattr(other, name), err_msg=name)
+    assert other.levels == pooled.levels
+    tiles = [i for i, k in enumerate(ran) if k < len(ran) - 2]  # the tiles' jobs come first, then the 2 components'
+    rests = [i for i, k in enumerate(ran) if k >= len(ran) - 2]
+    assert len(rests) == 2 and min(rests) < max(tiles)
+
+
 def radius_cut(h, faces, r):
     """From the base, split (forced) every active node wider than ``r`` until none is: one level of detail over the
     whole mesh, as a distant view asks for."""

@@ -9,17 +9,20 @@ evaluate every live vertex every round (docs/HIERARCHY.md, "The sequential build
 
 Units are whole connected components (each holding its groups: split further by ``component``); a component with
 more than ``TILE`` used vertices is first built in tiles of about that many, each down to 1/``REDUCE`` of its
-faces, its tiles' borders waiting for a second phase over whole components on the live mesh renumbered densely
+faces, its tiles' borders waiting for a second phase over the whole component on its live part renumbered densely
 (docs/HIERARCHY.md: built down to the base in the tiles, the borders would come after every coarse level, and the
-run time's cut would keep them at full resolution). The units of a phase run on up to ``workers`` threads, the
-largest first, each thread taking the next unit when done (a CPU launch releases the GIL); they share no face or
-vertex they change and each writes its own node range, so the hierarchy is the same, bit for bit, on any number of
-threads.
+run time's cut would keep them at full resolution). Tiles and components' second phases are one pool of jobs on up
+to ``workers`` threads (``lodprt.launches.run_jobs``; a CPU launch releases the GIL): a component's second phase
+starts as soon as its own tiles are done, beside other components' tiles, and a free thread takes the job of the
+longest estimated time. Jobs share no face or vertex they change and each writes its own node range (the second
+phases their own node arrays, merged after the tiles' nodes in component order), so the hierarchy is the same, bit
+for bit, on any number of threads and in any order.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import functools
 import os
 import threading
 import time
@@ -28,7 +31,7 @@ import numpy as np
 
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
-from lodprt.launches import warp_view
+from lodprt.launches import Job, run_jobs, warp_view
 from lodprt.model.hierarchy import Hierarchy, broken_link, distinct_corners
 from lodprt.model.hierarchy_inputs import BOUNDARY_WEIGHT, CONE_SLACK, checked_inputs
 from lodprt.model.hierarchy_levels import mesh_groups
@@ -101,18 +104,17 @@ def _set_groups(m, faces, group):
     m.group_faces = warp_view(np.bincount(group[faces[:, 0]], minlength=G).astype(np.int32), wp.int32)
 
 
-def _compacted(kh, m, t, group):
-    """The second phase's mesh and state on the live part of the mesh, its vertices renumbered densely in id order
-    (after the tiles, the survivors lie scattered over the arrays; dense, they share cache lines): (Mesh, State,
-    the original id of each vertex). Carried: positions, flags, groups, quadrics, the node standing at each vertex
-    with its cone and radius; the corner lists are made anew over the live faces (each vertex's in corner order, as
-    ``prepare`` makes them); the per-round state starts afresh, as at every phase."""
+def _compacted(kh, m, t, group, fidx):
+    """A second phase's mesh and state on the live faces ``fidx`` (one connected component's), their vertices
+    renumbered densely in id order (after the tiles, the survivors lie scattered over the arrays; dense, they share
+    cache lines): (Mesh, State, the original id of each vertex, the node standing at each). Carried: positions,
+    flags, groups, quadrics, each vertex's cone and radius; the nodes are the phase's own (vertex i stands for node
+    i, ``_merged`` maps them); the corner lists are made anew (each vertex's in corner order, as ``prepare`` makes
+    them); the per-round state starts afresh, as at every phase."""
     wp = warp()
-    faces = m.faces.numpy()[m.alive.numpy().astype(bool)]
-    keep = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(group)))
-    new = np.full(len(group), -1, np.int32)
-    new[keep] = np.arange(len(keep), dtype=np.int32)
-    faces = new[faces]
+    faces = m.faces.numpy()[fidx]
+    keep = np.unique(faces.ravel())
+    faces = np.searchsorted(keep, faces).astype(np.int32)
     V, corners = len(keep), faces.ravel()
     order = np.argsort(corners, kind="stable").astype(np.int32)
     same = corners[order[1:]] == corners[order[:-1]]
@@ -129,9 +131,8 @@ def _compacted(kh, m, t, group):
         setattr(c, name, warp_view(getattr(m, name).numpy()[keep], wp.uint8))
     c.group, c.quadric = warp_view(group[keep], wp.int32), warp_view(m.quadric.numpy()[keep], wp.float64)
     d = _state(kh, V, t.axis.numpy()[keep])
-    d.node_of = warp_view(t.node_of.numpy()[keep], wp.int32)
     d.half, d.radius = warp_view(t.half.numpy()[keep], wp.float64), warp_view(t.radius.numpy()[keep], wp.float64)
-    return c, d, keep
+    return c, d, keep, t.node_of.numpy()[keep]
 
 
 def _scratch(kh, V):
@@ -245,84 +246,201 @@ def _tiles(pos, faces, pieces, used):
     return funit, vunit
 
 
-def _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, pieces, reduce=0):
-    """One phase: a launch per unit of ``units`` ((V,) unit of each vertex, -1: it stays; (F,) unit of each face),
-    on up to ``workers`` threads that each take the unit of the longest estimated time left when done (``_run``;
-    ``pieces``: (V,) the connected component of each vertex, a unit's kind); each unit stops at
-    ``target_base`` faces of ``counters`` ((V,) the counter of each vertex, (F,) of each face), or with ``reduce`` at
-    1/``reduce`` of the faces its counter holds when that is more (a tile: its counter is its own). Units share no face
-    or vertex they change, and each has its own node and neighbour range, so the result does not depend on the
-    threads. ``report(collapses)`` is called with the collapses of the units done so far, in the calling thread. The
-    nodes are compacted from node ``at``; returns the next free node, the recorded neighbours and the most rounds of
-    a unit."""
-    vunit, funit = units
-    wp = warp()
-    nd, arr = nd_arr
-    V = len(vunit)
-    alive = m.alive.numpy().astype(bool)
-    movable = m.movable.numpy().astype(bool) & (vunit >= 0) & (t.dead.numpy() == 0)  # what may yet collapse
-    moves, entries = _sizes(vunit, funit, movable)
-    todo = [int(u) for u in np.argsort(-moves, kind="stable") if moves[u]]
-    node_base = at + np.concatenate([[0], np.cumsum(moves)[:-1]]).astype(np.int64)
-    nb_base = np.concatenate([[0], np.cumsum(entries)[:-1]]).astype(np.int64)
-    nd.nbs = warp_view(np.zeros(int(entries.sum()), np.int32), wp.int32)
-    vcount, fcount = counters
-    m.count_group, m.face_group = warp_view(np.maximum(vcount, 0), wp.int32), warp_view(fcount, wp.int32)
-    m.group_faces = warp_view(np.bincount(fcount[alive], minlength=int(fcount.max(initial=0)) + 1).astype(np.int32),
-                              wp.int32)
-    unit_wp = warp_view(vunit, wp.int32)
-    key = vunit.astype(np.int16) if len(moves) < 2**15 else vunit  # 16 bits: numpy's stable sort is a radix sort
-    members = np.argsort(key, kind="stable").astype(np.int32)  # each unit's vertices, ids ascending
-    starts = np.searchsorted(vunit[members], np.arange(len(moves) + 1))
-    members_wp = warp_view(members, wp.int32)
-    stop = np.full(len(moves), int(target_base), np.int64)
-    if reduce:
-        held = m.group_faces.numpy()
-        stop[:len(held)] = np.maximum(stop[:len(held)], held[:len(stop)] // reduce)
-    for a in (t.used, t.used_u, t.wait_v, t.wait_vr, t.wait_u, t.wait_ur):  # rounds count from 0 again
-        a.numpy().fill(-1)
-    ctrs = {u: _counters(kh, nb_base[u], entries[u]) for u in todo}
+class _Units:
+    """One phase's units on the mesh ``m`` and state ``t``: ``units`` ((V,) unit of each vertex, -1: it stays; (F,)
+    unit of each face), launched one at a time (``launch``, on any thread); each stops at ``target_base`` faces of
+    ``counters`` ((V,) the counter of each vertex, (F,) of each face), or with ``reduce`` at 1/``reduce`` of the
+    faces its counter holds when that is more (a tile: its counter is its own). Units share no face or vertex they
+    change, and each has its own node range from node ``at`` and neighbour range, so the result depends neither on
+    the threads nor on the order. ``kind``: the connected component of each unit (``pieces``: of each vertex)."""
 
-    def launch(s, q, u):
-        q.ctr = warp_view(ctrs[u], wp.int64)
+    def __init__(self, kh, m, t, nd, units, counters, at, target_base, pieces, reduce=0):
+        vunit, funit = units
+        wp = warp()
+        self.kh, self.m, self.t, self.nd, self.at = kh, m, t, nd, at
+        alive = m.alive.numpy().astype(bool)
+        movable = m.movable.numpy().astype(bool) & (vunit >= 0) & (t.dead.numpy() == 0)  # what may yet collapse
+        self.moves, entries = _sizes(vunit, funit, movable)
+        self.todo = [int(u) for u in np.argsort(-self.moves, kind="stable") if self.moves[u]]
+        self.node_base = at + np.concatenate([[0], np.cumsum(self.moves)[:-1]]).astype(np.int64)
+        self.nb_base = np.concatenate([[0], np.cumsum(entries)[:-1]]).astype(np.int64)
+        nd.nbs = warp_view(np.zeros(int(entries.sum()), np.int32), wp.int32)
+        vcount, fcount = counters
+        m.count_group, m.face_group = warp_view(np.maximum(vcount, 0), wp.int32), warp_view(fcount, wp.int32)
+        m.group_faces = warp_view(np.bincount(fcount[alive], minlength=int(fcount.max(initial=0)) + 1)
+                                  .astype(np.int32), wp.int32)
+        self.unit_wp = warp_view(vunit, wp.int32)
+        key = vunit.astype(np.int16) if len(self.moves) < 2**15 else vunit  # 16 bits: a radix sort
+        members = np.argsort(key, kind="stable").astype(np.int32)  # each unit's vertices, ids ascending
+        self.starts = np.searchsorted(vunit[members], np.arange(len(self.moves) + 1))
+        self.members_wp = warp_view(members, wp.int32)
+        self.stop = np.full(len(self.moves), int(target_base), np.int64)
+        if reduce:
+            held = m.group_faces.numpy()
+            self.stop[:len(held)] = np.maximum(self.stop[:len(held)], held[:len(self.stop)] // reduce)
+        for a in (t.used, t.used_u, t.wait_v, t.wait_vr, t.wait_u, t.wait_ur):  # rounds count from 0 again
+            a.numpy().fill(-1)
+        self.ctrs = {u: _counters(kh, self.nb_base[u], entries[u]) for u in self.todo}
+        self.kind = {u: int(pieces[members[self.starts[u]]]) for u in self.todo}
+        self.done, self.unstarted, self.lock = [], len(self.todo), threading.Lock()
+
+    def launch(self, s, q, u):
+        """Build unit ``u`` with a thread's scratch ``s`` and queue ``q`` (made for this mesh's vertex count)."""
+        wp, kh = warp(), self.kh
+        q.ctr = warp_view(self.ctrs[u], wp.int64)
         wp.launch(kh.greedy_build, dim=1, device="cpu",
-                  inputs=[m, s, q, t, nd, unit_wp, u, members_wp, int(starts[u]), int(starts[u + 1] - starts[u]),
-                          int(node_base[u]), int(stop[u]), EDGE_WEIGHT, FOLD_COS, SLIVER, MAX_VALENCE])
-        done.append(u)
+                  inputs=[self.m, s, q, self.t, self.nd, self.unit_wp, u, self.members_wp, int(self.starts[u]),
+                          int(self.starts[u + 1] - self.starts[u]), int(self.node_base[u]), int(self.stop[u]),
+                          EDGE_WEIGHT, FOLD_COS, SLIVER, MAX_VALENCE])
+        self.done.append(u)
 
-    done = []
-    kind = {u: int(pieces[members[starts[u]]]) for u in todo}
-    _run(lambda: (_scratch(kh, V), _queue(kh, V)), launch, todo, workers,
-         lambda: report(sum(int(ctrs[u][1]) for u in list(done))), size=moves, kind=kind)
-    if any(c[5] for c in ctrs.values()):
-        raise LodprtError("build_greedy: neighbour space exhausted (an internal sizing error)")
-    nbs = nd.nbs.numpy()
-    order = sorted(todo)
-    recorded = [nbs[nb_base[u]:int(ctrs[u][2])] for u in order]
-    at = _compact(arr, t.node_of.numpy(), at, node_base[order], [int(ctrs[u][1]) for u in order])
-    return at, recorded, max((int(c[8]) for c in ctrs.values()), default=0)
+    def release(self) -> None:
+        """Let the mesh, state and unit arrays go (every unit is done; ``finish`` needs none of them)."""
+        self.m = self.t = self.unit_wp = self.members_wp = None
+
+    def made(self) -> int:
+        """Collapses made by the units done so far."""
+        return sum(int(self.ctrs[u][1]) for u in list(self.done))
+
+    def jobs(self, follow=None) -> list:
+        """A ``Job`` per unit, each making the thread's scratch and queue for this mesh once (``follow``: kind -> the
+        work that waits for the units of that kind)."""
+        V = self.m.pos.shape[0]
+
+        def run(cache, u):
+            with self.lock:
+                self.unstarted -= 1
+            if cache.get("mesh") is not self.m:
+                cache["mesh"], cache["sq"] = self.m, (_scratch(self.kh, V), _queue(self.kh, V))
+            self.launch(*cache["sq"], u)
+            if not self.unstarted:  # no unit of this mesh left to start: the thread's scratch and queue go (memory)
+                cache.clear()
+
+        return [Job(functools.partial(run, u=u), size=float(self.moves[u]), kind=self.kind[u],
+                    follow=float((follow or {}).get(self.kind[u], 0.0))) for u in self.todo]
+
+    def finish(self, arr, refs=()):
+        """After every unit: the recorded neighbours (in unit order) and the most rounds of a unit; the nodes
+        compacted from node ``at`` (``_compact``, ``refs``: more arrays of node ids to follow them); returns (next
+        free node, recorded, rounds)."""
+        if any(c[5] for c in self.ctrs.values()):
+            raise LodprtError("build_greedy: neighbour space exhausted (an internal sizing error)")
+        nbs, order = self.nd.nbs.numpy(), sorted(self.todo)
+        recorded = [nbs[self.nb_base[u]:int(self.ctrs[u][2])] for u in order]
+        at = _compact(arr, refs, self.at, self.node_base[order], [int(self.ctrs[u][1]) for u in order])
+        self.release()
+        return at, recorded, max((int(c[8]) for c in self.ctrs.values()), default=0)
 
 
-def _compact(arr, node_of, at, node_base, made):
+def _compact(arr, refs, at, node_base, made):
     """Move each unit's nodes (from ``node_base``, ``made`` of them, in increasing order) down to follow the earlier
-    units' (creation = node id) and fix the references to them (parents, children, the node at each vertex). The
-    rows the move leaves behind get their parent and children cleared: a later phase's node written there takes
-    its parent only when it collapses, so a root of that phase would otherwise keep a stale one."""
+    units' (creation = node id) and fix the references to them (parents, children and the arrays of ``refs``)."""
     new_id = np.arange(len(arr["parent"]), dtype=np.int32)
-    end = at
     for src, n in zip(node_base, made):
         new_id[src:src + n] = np.arange(at, at + n, dtype=np.int32)
         for a in arr.values():
             if src != at:
                 a[at:at + n] = a[src:src + n]
         at += n
-        end = max(end, int(src) + n)
-    for a in (arr["parent"], arr["children"], node_of):
+    for a in (arr["parent"], arr["children"], *refs):
         live = a >= 0
         a[live] = new_id[a[live]]
-    arr["parent"][at:end] = -1
-    arr["children"][at:end] = -1
     return at
+
+
+def _rest(kh, compacted, group, target_base):
+    """The second phase of one connected component once its tiles are done, on its live part renumbered densely
+    (``compacted``: ``_compacted``'s), with nodes of its own (vertex i standing for node i), down to ``target_base``
+    faces per group. Returns what ``_merged`` needs."""
+    c, d, keep, standing = compacted
+    V, cf = len(keep), c.faces.numpy()
+    nd, arr = _nodes(kh, V, np.zeros((V, 3)), int((c.movable.numpy() != 0).sum()))
+    zero = np.zeros(V, np.int32)
+    u = _Units(kh, c, d, nd, (zero, np.zeros(len(cf), np.int32)), (group[keep], group[keep][cf[:, 0]]), V,
+               target_base, zero)
+    s, q = _scratch(kh, V), _queue(kh, V)
+    for k in u.todo:  # one unit, or none when nothing is left to move
+        u.launch(s, q, k)
+    end, recorded, rounds = u.finish(arr)
+    return {"keep": keep, "standing": standing, "arr": arr, "made": end - V,
+            "recorded": keep[np.concatenate(recorded)] if recorded else np.zeros(0, np.int32), "rounds": rounds}
+
+
+def _merged(arr, at, r):
+    """Append a component's second-phase nodes (``_rest``'s ``r``) at node ``at``: its node i < V is the node
+    standing at its vertex i (``r["standing"]``, compacted ids), node V + k becomes ``at + k``; returns the next
+    free node."""
+    V, n, local = len(r["keep"]), r["made"], r["arr"]
+    ids = np.concatenate([r["standing"], np.arange(at, at + n, dtype=np.int32)]).astype(np.int32)
+    own = slice(V, V + n)
+    parent = local["parent"][own]
+    arr["parent"][at:at + n] = np.where(parent >= 0, ids[np.maximum(parent, 0)], -1)
+    arr["children"][at:at + n] = ids[local["children"][own]]
+    arr["vertex"][at:at + n] = r["keep"][local["vertex"][own]]
+    for name in ("axis", "half", "radius", "error", "nb_count"):
+        arr[name][at:at + n] = local[name][own]
+    below = local["parent"][:V]
+    arr["parent"][r["standing"][below >= 0]] = ids[below[below >= 0]]
+    return at + n
+
+
+def _two_phases(kh, hold, nd_arr, tiles, group, pieces, at, target_base, workers, report):
+    """Every tile down to 1/REDUCE of its faces (on the full-size mesh and state ``hold`` = [m, t]), then each
+    connected component's rest (``_rest``), as one pool of jobs (``run_jobs``): a component's second phase starts as
+    soon as its own tiles are done, beside other components' tiles (a component with no tile at once), and the
+    tiles of the component with the most work behind them start first. Its nodes follow every tile's, components in
+    id order, whatever the order the jobs ran in. Returns (next free node, recorded neighbours, rounds)."""
+    m, t = hold
+    nd, arr = nd_arr
+    tile = _Units(kh, m, t, nd, (tiles[1], tiles[0]), (tiles[1], tiles[0]), at, target_base, pieces, REDUCE)
+    C = int(pieces.max(initial=-1)) + 1
+    fcomp = pieces[m.faces.numpy()[:, 0]]
+    forder = np.argsort(fcomp.astype(np.int16) if C < 2**15 else fcomp, kind="stable").astype(np.int32)
+    fstart = np.searchsorted(fcomp[forder], np.arange(C + 1))
+    movable = m.movable.numpy() != 0
+    comps = np.flatnonzero(np.bincount(pieces[movable], minlength=C))
+    rest = np.bincount(pieces[movable & (tiles[1] < 0)], minlength=C).astype(float)  # no tile moves these
+    del fcomp, movable, m, t
+    for u in tile.todo:
+        rest[tile.kind[u]] += tile.moves[u] / REDUCE
+    jobs = tile.jobs({int(a): rest[a] for a in comps})
+    results, lock, needed = {}, threading.Lock(), [len(jobs) + len(comps)]
+
+    def done_with_full_size():  # once every tile is done and every component compacted, the full size goes
+        with lock:
+            needed[0] -= 1
+            if not needed[0]:
+                hold.clear()
+                tile.release()
+
+    def first(cache, k):
+        tile_run[k](cache)
+        done_with_full_size()
+
+    def second(cache, a):
+        if not tile.unstarted:
+            cache.clear()
+        fidx = forder[fstart[a]:fstart[a + 1]]
+        compacted = _compacted(kh, hold[0], hold[1], group, fidx[hold[0].alive.numpy()[fidx] != 0])
+        done_with_full_size()
+        results[a] = _rest(kh, compacted, group, target_base)
+
+    tile_run = [j.run for j in jobs]
+    for k, j in enumerate(jobs):
+        j.run = functools.partial(first, k=k)
+    at_job = {}
+    for a in comps:
+        at_job[int(a)] = len(jobs)
+        jobs.append(Job(functools.partial(second, a=int(a)), size=float(rest[a]), kind=int(a)))
+    for k, u in enumerate(tile.todo):
+        jobs[k].then.append(at_job[tile.kind[u]])
+        jobs[at_job[tile.kind[u]]].waits += 1
+    run_jobs(jobs, workers, lambda: report(tile.made() + sum(r["made"] for r in list(results.values()))))
+    at, recorded, rounds = tile.finish(arr, [r["standing"] for r in results.values()])
+    for a in sorted(results):
+        at = _merged(arr, at, results[a])
+        recorded.append(results[a]["recorded"])
+    return at, recorded, rounds + max((r["rounds"] for r in results.values()), default=0)
 
 
 def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, *, component=None,
@@ -343,42 +461,29 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     workers = _workers(workers)
     load_kernels("cpu", kh, kp)
     m = _mesh(kh, pos, work, keep_boundary)
+    used = m.movable.numpy() != 0  # before ``prepare`` writes it
     prepared = _prepared(kh, kp, m, workers > 1)  # on its own thread while the groups and tiles are found
     group, pieces = _groups(V, work, comp)
-    used = np.zeros(V, bool)
-    used[work.ravel()] = True
     tiles = _tiles(pos, work, pieces, used)
     prepared()
     _set_groups(m, work, group)
     t = _state(kh, V, nrm)
-    movable = m.movable.numpy().astype(bool)
-    nd_arr = _nodes(kh, V, nrm, int(movable.sum()))
-    at, recorded, rounds = V, [], 0
-    total = int(movable.sum())
+    total = int((m.movable.numpy() != 0).sum())
+    nd_arr = _nodes(kh, V, nrm, total)
 
-    def phase(m, t, units, counters, pieces, reduce=0):
-        nonlocal at, rounds
-        before = at - V
-
-        def report(made):
-            if progress is not None:
-                progress(before + made, total)
-
-        at, rec, r = _phase(kh, m, t, nd_arr, units, counters, at, target_base, workers, report, pieces, reduce)
-        recorded.extend(rec)
-        rounds += r
+    def report(made):
+        if progress is not None:
+            progress(made, total)
 
     if tiles is None:  # whole components, each group to target_base
-        phase(m, t, (pieces, pieces[work[:, 0]]), (group, group[work[:, 0]]), pieces)
-    else:  # each tile to 1/REDUCE of its faces (its own counter), its borders waiting; then the rest, dense
-        phase(m, t, (tiles[1], tiles[0]), (tiles[1], tiles[0]), pieces, REDUCE)
-        c, d, keep = _compacted(kh, m, t, group)
-        m = t = None  # the full-size mesh and state are done with (memory)
-        first, done = at, len(recorded)
-        cf = c.faces.numpy()
-        phase(c, d, (pieces[keep], pieces[keep][cf[:, 0]]), (group[keep], group[keep][cf[:, 0]]), pieces[keep])
-        nd_arr[1]["vertex"][first:at] = keep[nd_arr[1]["vertex"][first:at]]  # the original vertex ids
-        recorded[done:] = [keep[r] for r in recorded[done:]]
+        units = _Units(kh, m, t, nd_arr[0], (pieces, pieces[work[:, 0]]), (group, group[work[:, 0]]), V,
+                       target_base, pieces)
+        run_jobs(units.jobs(), workers, lambda: report(units.made()))
+        at, recorded, rounds = units.finish(nd_arr[1])
+    else:  # each tile to 1/REDUCE of its faces (its own counter), its borders waiting; then each component's rest
+        hold = [m, t]
+        m = t = None
+        at, recorded, rounds = _two_phases(kh, hold, nd_arr, tiles, group, pieces, V, target_base, workers, report)
     h = _hierarchy(kp, nd_arr[1], at, V, np.concatenate(recorded), rounds)
     h.build_seconds = time.perf_counter() - t0
     return h
@@ -389,57 +494,6 @@ def _workers(workers):
     if workers is None:
         return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return int(workers)
-
-
-def _run(make, launch, todo, workers, after, size=None, kind=None):
-    """``launch(*make(), unit)`` for every unit of ``todo`` on up to ``workers`` threads (a CPU launch releases the
-    GIL), each with its own ``make()`` (scratch, queue); ``after()`` in the calling thread after each of its units and
-    at the end. A free thread takes the first unit of ``todo`` left, or with ``size`` and ``kind`` (unit -> its
-    collapses, and the component it lies in) the one of the longest estimated time: its size times the seconds per
-    collapse its kind's finished units took (a kind with none finished yet: the slowest rate known), so that a costly
-    kind's last tiles do not start last and keep one thread busy alone at the end. Each unit's result does not depend
-    on the order."""
-    left = list(todo)
-    lock = threading.Lock()
-    failed = []
-    rate = {}  # kind -> [seconds, collapses] of its finished units
-
-    def take():
-        if size is None or len(left) < 2:
-            return left.pop(0)
-        slowest = max((sec / max(n, 1) for sec, n in rate.values()), default=1.0)
-        est = [size[u] * (rate[kind[u]][0] / max(rate[kind[u]][1], 1) if kind[u] in rate else slowest) for u in left]
-        return left.pop(int(np.argmax(est)))  # ties: the first, the largest
-
-    def work(caller=False):
-        own = make()
-        while True:
-            with lock:
-                if not left or failed:
-                    return
-                u = take()
-            try:
-                t = time.perf_counter()
-                launch(*own, u)
-                if size is not None:
-                    with lock:
-                        r = rate.setdefault(kind[u], [0.0, 0])
-                        r[0], r[1] = r[0] + time.perf_counter() - t, r[1] + int(size[u])
-            except BaseException as e:  # noqa: BLE001 (re-raised in the calling thread)
-                failed.append(e)
-                return
-            if caller:
-                after()
-
-    threads = [threading.Thread(target=work) for _ in range(max(1, min(int(workers), len(left))) - 1)]
-    for th in threads:
-        th.start()
-    work(caller=True)
-    for th in threads:
-        th.join()
-    if failed:
-        raise failed[0]
-    after()
 
 
 def _hierarchy(kp, arr, N, V, nbs, rounds) -> Hierarchy:

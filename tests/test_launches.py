@@ -1,0 +1,81 @@
+"""``lodprt.launches.run_jobs``: the job pool of the sequential hierarchy build (tiles, then each component's rest).
+Every job runs once, never before the jobs it waits for, on up to ``workers`` threads; the order of the ready jobs
+follows the estimates; errors and cycles are raised in the calling thread."""
+
+import threading
+import time
+
+import pytest
+
+from lodprt.launches import Job, run_jobs
+
+
+def chain_jobs(log, lock, sleep=0.0):
+    """Two kinds of tiles, each kind's rest waiting for its own tiles (the build's shape)."""
+    def rec(name):
+        def run(cache):
+            with lock:
+                log.append(("start", name, threading.get_ident()))
+            time.sleep(sleep)
+            with lock:
+                log.append(("end", name, threading.get_ident()))
+        return run
+
+    jobs = [Job(rec(f"a{k}"), size=10, kind="a", follow=5) for k in range(4)]
+    jobs += [Job(rec(f"b{k}"), size=8, kind="b", follow=1) for k in range(2)]
+    jobs += [Job(rec("a-rest"), size=5, kind="a", waits=4), Job(rec("b-rest"), size=1, kind="b", waits=2)]
+    for k in range(4):
+        jobs[k].then.append(6)
+    for k in (4, 5):
+        jobs[k].then.append(7)
+    return jobs
+
+
+@pytest.mark.parametrize("workers", [1, 2, 4])
+def test_every_job_runs_once_after_what_it_waits_for(workers):
+    log, lock, afters = [], threading.Lock(), []
+    me = threading.get_ident()
+    run_jobs(chain_jobs(log, lock, 0.002), workers, lambda: afters.append(threading.get_ident()))
+    starts = [e[1] for e in log if e[0] == "start"]
+    ends = {e[1]: i for i, e in enumerate(log) if e[0] == "end"}
+    assert sorted(starts) == sorted(["a0", "a1", "a2", "a3", "b0", "b1", "a-rest", "b-rest"])
+    start_at = {e[1]: i for i, e in enumerate(log) if e[0] == "start"}
+    assert all(ends[f"a{k}"] < start_at["a-rest"] for k in range(4))
+    assert all(ends[f"b{k}"] < start_at["b-rest"] for k in range(2))
+    assert len({e[2] for e in log}) <= workers
+    assert afters and set(afters) == {me}  # after() only in the calling thread, and once at the end
+
+
+def test_one_thread_probes_each_kind_then_follows_the_estimates():
+    """On one thread the order is the schedule itself: the largest job of each kind of several jobs first (a0, then
+    b0, whose rate is then measured), then the longest estimates; a rest as soon as it is ready and longest."""
+    log, lock = [], threading.Lock()
+    run_jobs(chain_jobs(log, lock), 1)
+    order = [e[1] for e in log if e[0] == "start"]
+    assert order[:2] == ["a0", "b0"]
+    assert order.index("a-rest") > order.index("a3") and order.index("b-rest") > order.index("b1")
+
+
+def test_an_error_stops_the_pool_and_is_raised_here():
+    ran = []
+
+    def boom(cache):
+        raise ValueError("job failed")
+
+    jobs = [Job(boom, size=10), Job(lambda c: ran.append(1), size=1, waits=1)]
+    jobs[0].then.append(1)
+    with pytest.raises(ValueError, match="job failed"):
+        run_jobs(jobs, 2)
+    assert not ran
+
+
+def test_jobs_that_wait_for_each_other_are_refused_not_hung():
+    jobs = [Job(lambda c: None, size=1, waits=1, then=[1]), Job(lambda c: None, size=1, waits=1, then=[0])]
+    with pytest.raises(RuntimeError, match="wait for each other"):
+        run_jobs(jobs, 2)
+
+
+def test_no_jobs_is_no_work():
+    calls = []
+    run_jobs([], 3, lambda: calls.append(1))
+    assert calls == [1]
