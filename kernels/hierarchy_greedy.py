@@ -316,7 +316,7 @@ def record(m: Mesh, s: Scratch, q: Queue, t: State, nd: Nodes, v: int, u: int, n
     b = t.node_of[v]
     nd.parent[a] = k
     nd.parent[b] = k
-    nd.parent[k] = -1  # a root until it collapses (the row may hold an earlier phase's node: the host clears those too)
+    nd.parent[k] = -1  # a root until it collapses
     nd.children[k, 0] = a
     nd.children[k, 1] = b
     nd.vertex[k] = u
