@@ -1,8 +1,9 @@
 """Before and after the sequential hierarchy build (``lodprt.kernels.hierarchy_greedy``, tag H-G), one Warp thread
-each: ``components`` (the mesh's groups: connected components, split by a label, by union-find),
-``prepare`` (corner lists, Garland-Heckbert quadrics, boundary and non-manifold flags, boundary planes: what
-``lodprt.model.hierarchy_build`` computes for the rounds build) and ``leaf_layout`` (the hierarchy's depth-first
-leaf order for a tree whose children precede their parents). Loops are bounded by the arrays' shapes.
+each: ``components`` (the mesh's groups: connected components, split by a label, by union-find), ``corner_lists``
+(each vertex's corners, for a second phase's compacted mesh), ``prepare`` (corner lists, Garland-Heckbert quadrics,
+boundary and non-manifold flags, boundary planes: what ``lodprt.model.hierarchy_build`` computes for the rounds
+build) and ``leaf_layout`` (the hierarchy's depth-first leaf order for a tree whose children precede their parents).
+Loops are bounded by the arrays' shapes.
 """
 
 import warp as wp
@@ -105,6 +106,20 @@ def boundary_planes(m: Mesh, s: Scratch, a: int, nr: int, boundary_weight: wp.fl
         add_plane(m.quadric, b, mm, -wp.dot(mm, pa), w)
 
 
+@wp.func
+def link_corners(m: Mesh):
+    """Each vertex's corner list (head, nxt; both -1 on entry), its corners in increasing order."""
+    for c in range(wp.min(3 * m.faces.shape[0], m.nxt.shape[0]) - 1, -1, -1):
+        v = m.faces[c // 3, c % 3]
+        m.nxt[c] = m.head[v]
+        m.head[v] = c
+
+
+@wp.kernel
+def corner_lists(m: Mesh):  # In: faces; Out: head, nxt (both -1 on entry)
+    link_corners(m)
+
+
 @wp.kernel
 def prepare(
     m: Mesh,  # In: pos, faces, alive (all 1), movable (1 where the vertex may move: used, and not on the rim when
@@ -114,10 +129,7 @@ def prepare(
 ):
     V = m.pos.shape[0]
     F = m.faces.shape[0]
-    for c in range(3 * F - 1, -1, -1):  # each vertex's corners in increasing order
-        v = m.faces[c // 3, c % 3]
-        m.nxt[c] = m.head[v]
-        m.head[v] = c
+    link_corners(m)
     for f in range(F):  # Garland-Heckbert: area x plane plane^T at each corner
         n, dbl = face_normal(m, f)
         if dbl <= wp.float64(0.0):

@@ -154,8 +154,9 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
     (a kind none of whose jobs has finished: the slowest rate known; ties: the first in ``jobs``), so that a costly
     kind's last jobs do not start last and keep one thread busy alone, and the work behind a long chain starts
     early; but first, the largest job of each kind of several jobs none of which has run yet, so that its rate is
-    measured before the rest of that kind is placed. ``after()`` runs in the calling thread after each of its jobs and at the end; the first error stops the
-    rest and is raised here. The jobs must not depend on the order they run in."""
+    measured before the rest of that kind is placed. ``after()`` runs in the calling thread after each of its jobs
+    and at the end; the first error stops the rest and is raised here. The jobs must not depend on the order they
+    run in."""
     lock = threading.Condition()
     ready = [k for k, j in enumerate(jobs) if j.waits == 0]
     waits = [j.waits for j in jobs]

@@ -104,29 +104,24 @@ def _set_groups(m, faces, group):
     m.group_faces = warp_view(np.bincount(group[faces[:, 0]], minlength=G).astype(np.int32), wp.int32)
 
 
-def _compacted(kh, m, t, group, fidx):
+def _compacted(kh, kp, m, t, group, fidx):
     """A second phase's mesh and state on the live faces ``fidx`` (one connected component's), their vertices
     renumbered densely in id order (after the tiles, the survivors lie scattered over the arrays; dense, they share
     cache lines): (Mesh, State, the original id of each vertex, the node standing at each). Carried: positions,
     flags, groups, quadrics, each vertex's cone and radius; the nodes are the phase's own (vertex i stands for node
-    i, ``_merged`` maps them); the corner lists are made anew (each vertex's in corner order, as ``prepare`` makes
-    them); the per-round state starts afresh, as at every phase."""
+    i, ``_merged`` maps them); the corner lists are made anew by ``prepare``'s own loop (``corner_lists``); the
+    per-round state starts afresh, as at every phase."""
     wp = warp()
     faces = m.faces.numpy()[fidx]
     keep = np.unique(faces.ravel())
     faces = np.searchsorted(keep, faces).astype(np.int32)
-    V, corners = len(keep), faces.ravel()
-    order = np.argsort(corners, kind="stable").astype(np.int32)
-    same = corners[order[1:]] == corners[order[:-1]]
-    nxt = np.full(len(corners), -1, np.int32)
-    nxt[order[:-1][same]] = order[1:][same]
-    first = order[np.concatenate([[True], ~same])]
-    head = np.full(V, -1, np.int32)
-    head[corners[first]] = first
+    V = len(keep)
     c = kh.Mesh()
     c.pos, c.faces = warp_view(np.ascontiguousarray(m.pos.numpy()[keep]), wp.float64), warp_view(faces, wp.int32)
     c.alive = warp_view(np.ones(len(faces), np.uint8), wp.uint8)
-    c.head, c.nxt = warp_view(head, wp.int32), warp_view(nxt, wp.int32)
+    c.head = warp_view(np.full(V, -1, np.int32), wp.int32)
+    c.nxt = warp_view(np.full(faces.size, -1, np.int32), wp.int32)
+    wp.launch(kp.corner_lists, dim=1, inputs=[c], device="cpu")  # as ``prepare`` makes them
     for name in ("boundary", "frozen", "movable"):
         setattr(c, name, warp_view(getattr(m, name).numpy()[keep], wp.uint8))
     c.group, c.quadric = warp_view(group[keep], wp.int32), warp_view(m.quadric.numpy()[keep], wp.float64)
@@ -384,7 +379,7 @@ def _merged(arr, at, r):
     return at + n
 
 
-def _two_phases(kh, hold, nd_arr, tiles, group, pieces, at, target_base, workers, report):
+def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, workers, report):
     """Every tile down to 1/REDUCE of its faces (on the full-size mesh and state ``hold`` = [m, t]), then each
     connected component's rest (``_rest``), as one pool of jobs (``run_jobs``): a component's second phase starts as
     soon as its own tiles are done, beside other components' tiles (a component with no tile at once), and the
@@ -421,7 +416,7 @@ def _two_phases(kh, hold, nd_arr, tiles, group, pieces, at, target_base, workers
         if not tile.unstarted:
             cache.clear()
         fidx = forder[fstart[a]:fstart[a + 1]]
-        compacted = _compacted(kh, hold[0], hold[1], group, fidx[hold[0].alive.numpy()[fidx] != 0])
+        compacted = _compacted(kh, kp, hold[0], hold[1], group, fidx[hold[0].alive.numpy()[fidx] != 0])
         done_with_full_size()
         results[a] = _rest(kh, compacted, group, target_base)
 
@@ -483,7 +478,7 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     else:  # each tile to 1/REDUCE of its faces (its own counter), its borders waiting; then each component's rest
         hold = [m, t]
         m = t = None
-        at, recorded, rounds = _two_phases(kh, hold, nd_arr, tiles, group, pieces, V, target_base, workers, report)
+        at, recorded, rounds = _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, V, target_base, workers, report)
     h = _hierarchy(kp, nd_arr[1], at, V, np.concatenate(recorded), rounds)
     h.build_seconds = time.perf_counter() - t0
     return h
