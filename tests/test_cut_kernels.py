@@ -105,9 +105,10 @@ def test_nodes_follow_every_move(bunny_floor, bunny_hierarchy, device):
         act = cut.nodes
         return rng.permutation(act[act >= h.num_vertices])
 
-    def parents():
+    def parents():  # the coarsen candidates: both children active
         act = cut.nodes
-        return rng.permutation(np.unique(h.parent[act][h.parent[act] >= 0]))
+        p = np.unique(h.parent[act][h.parent[act] >= 0])
+        return rng.permutation(p[cut.active[h.children[p, 0]] & cut.active[h.children[p, 1]]])
 
     moves = [
         lambda: [cut.refine(int(k)) for k in inner()[:200]],
