@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures
+import heapq
 import os
 import threading
 import time
@@ -158,21 +159,38 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
     and at the end; the first error stops the rest and is raised here. The jobs must not depend on the order they
     run in."""
     lock = threading.Condition()
-    ready = [k for k, j in enumerate(jobs) if j.waits == 0]
     waits = [j.waits for j in jobs]
     left, failed, rate, running = len(jobs), [], {}, [0]
-
     jobs_of = collections.Counter(j.kind for j in jobs)
     busy = collections.Counter()  # kind -> its jobs running
+    # ready jobs, longest first (ties: the first in ``jobs``): one heap per kind of several jobs (their rates differ),
+    # one for the kinds of one job (never measured while ready: all at the slowest rate known)
+    single, multi, count = [], {}, [0]
+
+    def push(k):
+        key = (-(jobs[k].size + jobs[k].follow), k)
+        heapq.heappush(multi.setdefault(jobs[k].kind, []) if jobs_of[jobs[k].kind] > 1 else single, key)
+        count[0] += 1
+
+    for k, j in enumerate(jobs):
+        if j.waits == 0:
+            push(k)
 
     def take():
         slowest = max((sec / max(n, 1e-300) for sec, n in rate.values()), default=1.0)
-        est = np.array([(jobs[k].size + jobs[k].follow) * (rate[jobs[k].kind][0] / max(rate[jobs[k].kind][1], 1e-300)
-                                                           if jobs[k].kind in rate else slowest) for k in ready])
-        # a kind of several jobs none of which has run yet goes first: its rate is then known for the others
-        probe = np.array([jobs_of[jobs[k].kind] > 1 and jobs[k].kind not in rate and not busy[jobs[k].kind]
-                          for k in ready])
-        k = ready.pop(int(np.argmax(np.where(probe, est, -1.0) if probe.any() else est)))
+        best = None  # (probe, estimate, -index, heap)
+        for kind, heap in [(None, single), *multi.items()]:
+            if not heap:
+                continue
+            size, k = -heap[0][0], heap[0][1]
+            known = kind is not None and kind in rate
+            # a kind of several jobs none of which has run yet goes first: its rate is then known for the others
+            probe = kind is not None and not known and not busy[kind]
+            cand = (probe, size * (rate[kind][0] / max(rate[kind][1], 1e-300) if known else slowest), -k, heap)
+            if best is None or cand[:3] > best[:3]:
+                best = cand
+        k = heapq.heappop(best[3])[1]
+        count[0] -= 1
         busy[jobs[k].kind] += 1
         return k
 
@@ -181,7 +199,7 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
         cache = {}
         while True:
             with lock:
-                while not ready and left and not failed:
+                while not count[0] and left and not failed:
                     if not running[0]:  # nothing runs that could release a job: a cycle of waits
                         failed.append(RuntimeError("run_jobs: the jobs left wait for each other"))
                         lock.notify_all()
@@ -209,8 +227,7 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
                 for d in jobs[k].then:
                     waits[d] -= 1
                     if waits[d] == 0:
-                        ready.append(d)
-                ready.sort()
+                        push(d)
                 lock.notify_all()
             if caller:
                 after()
