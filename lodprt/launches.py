@@ -179,13 +179,13 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
     def take():
         slowest = max((sec / max(n, 1e-300) for sec, n in rate.values()), default=1.0)
         best = None  # (probe, estimate, -index, heap)
-        for kind, heap in [(None, single), *multi.items()]:
+        for many, kind, heap in [(False, None, single), *((True, kind, h) for kind, h in multi.items())]:
             if not heap:
                 continue
             size, k = -heap[0][0], heap[0][1]
-            known = kind is not None and kind in rate
+            known = many and kind in rate
             # a kind of several jobs none of which has run yet goes first: its rate is then known for the others
-            probe = kind is not None and not known and not busy[kind]
+            probe = many and not known and not busy[kind]
             cand = (probe, size * (rate[kind][0] / max(rate[kind][1], 1e-300) if known else slowest), -k, heap)
             if best is None or cand[:3] > best[:3]:
                 best = cand

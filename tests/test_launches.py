@@ -56,6 +56,20 @@ def test_one_thread_probes_each_kind_then_follows_the_estimates():
     assert order.index("a-rest") > order.index("a3") and order.index("b-rest") > order.index("b1")
 
 
+def test_a_kind_named_none_of_several_jobs_is_probed_like_any_other():
+    """``kind=None`` is a kind like any other (the default): its jobs share a measured rate and its largest is
+    probed before the rest are placed, beside the one-job kinds; here the probe of None (n0) comes before the one-job
+    kind's larger job (s)."""
+    log, lock = [], threading.Lock()
+
+    def rec(name):
+        return lambda cache: log.append(name)
+
+    jobs = [Job(rec("s"), size=100, kind="single")] + [Job(rec(f"n{k}"), size=10 - k) for k in range(3)]
+    run_jobs(jobs, 1)
+    assert log[0] == "n0" and sorted(log) == ["n0", "n1", "n2", "s"]
+
+
 def test_an_error_stops_the_pool_and_is_raised_here():
     ran = []
 

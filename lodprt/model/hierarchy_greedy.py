@@ -95,15 +95,6 @@ def _prepared(kh, kp, m, background):
     return job.result  # re-raises the launch's error in the caller
 
 
-def _set_groups(m, faces, group):
-    """The Mesh's groups: of each vertex, of each face (its first corner's) and each group's face count."""
-    wp = warp()
-    G = int(group.max()) + 1 if len(group) else 1
-    m.group = warp_view(group, wp.int32)
-    m.face_group, m.count_group = warp_view(group[faces[:, 0]], wp.int32), warp_view(group, wp.int32)
-    m.group_faces = warp_view(np.bincount(group[faces[:, 0]], minlength=G).astype(np.int32), wp.int32)
-
-
 def _compacted(kh, kp, m, t, group, fidx):
     """A second phase's mesh and state on the live faces ``fidx`` (one connected component's), their vertices
     renumbered densely in id order (after the tiles, the survivors lie scattered over the arrays; dense, they share
@@ -297,9 +288,9 @@ class _Units:
         """Collapses made by the units done so far."""
         return sum(int(self.ctrs[u][1]) for u in list(self.done))
 
-    def jobs(self, follow=None) -> list:
+    def jobs(self, follow=None, after=None) -> list:
         """A ``Job`` per unit, each making the thread's scratch and queue for this mesh once (``follow``: kind -> the
-        work that waits for the units of that kind)."""
+        work that waits for the units of that kind; ``after()``: called when a unit is done)."""
         V = self.m.pos.shape[0]
 
         def run(cache, u):
@@ -310,6 +301,8 @@ class _Units:
             self.launch(*cache["sq"], u)
             if not self.unstarted:  # no unit of this mesh left to start: the thread's scratch and queue go (memory)
                 cache.clear()
+            if after is not None:
+                after()
 
         return [Job(functools.partial(run, u=u), size=float(self.moves[u]), kind=self.kind[u],
                     follow=float((follow or {}).get(self.kind[u], 0.0))) for u in self.todo]
@@ -398,8 +391,7 @@ def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, wor
     del fcomp, movable, m, t
     for u in tile.todo:
         rest[tile.kind[u]] += tile.moves[u] / REDUCE
-    jobs = tile.jobs({int(a): rest[a] for a in comps})
-    results, lock, needed = {}, threading.Lock(), [len(jobs) + len(comps)]
+    lock, needed = threading.Lock(), [len(tile.todo) + len(comps)]
 
     def done_with_full_size():  # once every tile is done and every component compacted, the full size goes
         with lock:
@@ -407,10 +399,6 @@ def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, wor
             if not needed[0]:
                 hold.clear()
                 tile.release()
-
-    def first(cache, k):
-        tile_run[k](cache)
-        done_with_full_size()
 
     def second(cache, a):
         if not tile.unstarted:
@@ -420,9 +408,7 @@ def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, wor
         done_with_full_size()
         results[a] = _rest(kh, compacted, group, target_base)
 
-    tile_run = [j.run for j in jobs]
-    for k, j in enumerate(jobs):
-        j.run = functools.partial(first, k=k)
+    jobs, results = tile.jobs({int(a): rest[a] for a in comps}, after=done_with_full_size), {}
     at_job = {}
     for a in comps:
         at_job[int(a)] = len(jobs)
@@ -461,7 +447,7 @@ def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     group, pieces = _groups(V, work, comp)
     tiles = _tiles(pos, work, pieces, used)
     prepared()
-    _set_groups(m, work, group)
+    m.group = warp_view(group, warp().int32)  # the per-phase counters are ``_Units``' to set
     t = _state(kh, V, nrm)
     total = int((m.movable.numpy() != 0).sum())
     nd_arr = _nodes(kh, V, nrm, total)
