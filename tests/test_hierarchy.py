@@ -316,12 +316,14 @@ def test_small_and_awkward_meshes():
     np.testing.assert_array_equal(Cut.full(h, fin).triangles(), fin)
 
 
-def test_bad_input_is_refused():
-    """Out-of-range faces and NaN positions raise LodprtError, not a deep traceback."""
-    with pytest.raises(LodprtError, match="faces"):
-        build_hierarchy(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((3, 3)))
-    with pytest.raises(LodprtError, match="non-finite"):
-        build_hierarchy(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), np.zeros((3, 3)))
+@pytest.mark.parametrize("method", ["sequential", "rounds"])
+def test_bad_input_is_refused(method):
+    """Out-of-range faces and NaN positions raise LodprtError, not a deep traceback, under the name of the
+    function called (whichever build does the work)."""
+    with pytest.raises(LodprtError, match="^build_hierarchy: faces"):
+        build_hierarchy(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((3, 3)), method=method)
+    with pytest.raises(LodprtError, match="^build_hierarchy: non-finite"):
+        build_hierarchy(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), np.zeros((3, 3)), method=method)
 
 
 def test_batched_steps_stay_legal(scene, hier):

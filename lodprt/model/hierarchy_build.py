@@ -313,7 +313,8 @@ def build_hierarchy(
         from lodprt.model.hierarchy_greedy import build_greedy
 
         hier = build_greedy(positions, faces, normals, component=component, target_base=target_base,
-                            keep_boundary=keep_boundary, workers=workers, progress=progress)
+                            keep_boundary=keep_boundary, workers=workers, progress=progress,
+                            caller="build_hierarchy")
         log.info("hierarchy (sequential): %d vertices, %d nodes, %d roots, depth %d, %.1f s", hier.num_vertices,
                  hier.num_nodes, len(hier.roots), hier.depth, hier.build_seconds)
         return hier

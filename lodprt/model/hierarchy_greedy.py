@@ -49,10 +49,10 @@ TILE = 20_000
 REDUCE = 8
 
 
-def _inputs(positions, faces, normals, component, target_base):
+def _inputs(positions, faces, normals, component, target_base, caller):
     """float64 positions, int32 faces without repeated corners, unit float64 normals and the ``component`` labels
-    (or None); ``checked_inputs`` refuses bad input."""
-    pos, f, nrm, comp = checked_inputs("build_greedy", positions, faces, normals, component, target_base)
+    (or None); ``checked_inputs`` refuses bad input, naming ``caller``."""
+    pos, f, nrm, comp = checked_inputs(caller, positions, faces, normals, component, target_base)
     return pos, np.ascontiguousarray(f[distinct_corners(f)]), nrm, comp
 
 
@@ -426,18 +426,18 @@ def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, wor
 
 def build_greedy(positions: np.ndarray, faces: np.ndarray, normals: np.ndarray, *, component=None,
                  target_base: int = 64, keep_boundary: bool = False, workers: int | None = None,
-                 progress=None) -> Hierarchy:
+                 progress=None, caller: str = "build_greedy") -> Hierarchy:
     """The vertex hierarchy of a triangle mesh built in sequence (module docstring): the arguments and the result
     of ``lodprt.model.hierarchy_build.build_hierarchy``, which calls it for ``method="sequential"`` (its default).
     ``progress(collapses, total)`` is called as units finish (one launch per unit: a scene of one small component
     reports once). A vertex with more than ``CAP`` (128) neighbours takes part in no collapse. Raises LodprtError
-    naming the bad input."""
+    naming the bad input, after ``caller`` (the function the user called)."""
     from lodprt.devices import load_kernels
     from lodprt.kernels import hierarchy_greedy as kh
     from lodprt.kernels import hierarchy_prepare as kp
 
     t0 = time.perf_counter()
-    pos, work, nrm, comp = _inputs(positions, faces, normals, component, target_base)
+    pos, work, nrm, comp = _inputs(positions, faces, normals, component, target_base, caller)
     V = len(pos)
     workers = _workers(workers)
     load_kernels("cpu", kh, kp)
