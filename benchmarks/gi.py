@@ -1,7 +1,7 @@
 """Interreflection in the point-light bake: LOD GI bake against the full-resolution GI bake, and against Mitsuba 3.
 
     python benchmarks/gi.py [--quick] [--mitsuba] [--json PATH] [--device cpu|cuda]
-    python benchmarks/gi.py --floors [--quick] [--repeats 3] [--tolerances 0.01 0.02 1]
+    python benchmarks/gi.py --floors [--quick] [--repeats 5] [--tolerances 0.01 0.02 1]
 
 Scene: the Stanford bunny on a floor, both diffuse white (kd 0.8, ks 0). For each bounce count 0..3 and
 gathering ray count, in the same run: the full-resolution GI bake and the LOD GI bake (light cut --threshold-deg
@@ -331,8 +331,8 @@ def main():
     p.add_argument("--indirect-threshold-deg", type=float, default=20.0, help="indirect cut (default 20)")
     p.add_argument("--floors", action="store_true", help="only the floor sweep: full vs LOD (G-5 and G-9) on floors "
                    "of 60, 200 and 400, 2 bounces, default rays (gi-floors.json)")
-    p.add_argument("--repeats", type=int, default=3, help="floor sweep: rounds of the full bake and every cut, "
-                   "interleaved; medians reported (default 3)")
+    p.add_argument("--repeats", type=int, default=5, help="floor sweep: rounds of the full bake and every cut, "
+                   "interleaved; medians reported (default 5)")
     p.add_argument("--tolerances", type=float, nargs="+", default=[0.01, 0.0125, 0.015, 0.02, 1.0],
                    help="G-9 tolerances of the floor sweep (default 0.01 0.0125 0.015 0.02 1; 1 is the coarsest cut: "
                    "the cost of everything but the gathering)")
