@@ -333,9 +333,9 @@ def main():
                    "of 60, 200 and 400, 2 bounces, default rays (gi-floors.json)")
     p.add_argument("--repeats", type=int, default=5, help="floor sweep: rounds of the full bake and every cut, "
                    "interleaved; medians reported (default 5)")
-    p.add_argument("--tolerances", type=float, nargs="+", default=[0.01, 0.0125, 0.015, 0.02, 1.0],
-                   help="G-9 tolerances of the floor sweep (default 0.01 0.0125 0.015 0.02 1; 1 is the coarsest cut: "
-                   "the cost of everything but the gathering)")
+    p.add_argument("--tolerances", type=float, nargs="+", default=[0.01, 0.0125, 0.014, 0.015, 0.02, 1.0],
+                   help="G-9 tolerances of the floor sweep (default 0.01 0.0125 0.014 0.015 0.02 1; 1 is the coarsest "
+                   "cut: the cost of everything but the gathering)")
     args = p.parse_args()
     from lodprt.devices import resolve_device
     from lodprt.model.hierarchy_build import build_hierarchy
