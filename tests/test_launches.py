@@ -60,7 +60,7 @@ def test_a_kind_named_none_of_several_jobs_is_probed_like_any_other():
     """``kind=None`` is a kind like any other (the default): its jobs share a measured rate and its largest is
     probed before the rest are placed, beside the one-job kinds; here the probe of None (n0) comes before the one-job
     kind's larger job (s)."""
-    log, lock = [], threading.Lock()
+    log = []
 
     def rec(name):
         return lambda cache: log.append(name)
