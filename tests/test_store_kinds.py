@@ -172,15 +172,19 @@ def test_runtime_kernels_on_every_order(bunny_floor, bunny_hierarchy, tmp_path, 
 
 
 @pytest.mark.warp_debug
-@pytest.mark.parametrize("name", ["grey-diffuse-cut", "rgb-diffuse-cut", "rgb-sh-cut"])
-def test_view_cut_relighting_on_every_kind(kinds, name):
-    """The view-cut frame of a 1- or n^2-coefficient, 1- or 3-channel store: relit radiance equals the float64
-    full-resolution reference at the active vertices, the kernel's e_lumi equals its float64 reference (which
-    reads the boxes' own width), and the cut stays legal over a short orbit."""
+@pytest.mark.parametrize("interpolation", ["direct", "thesis"])
+@pytest.mark.parametrize("name", ["grey-diffuse-cut", "rgb-diffuse-cut", "grey-sh-cut", "rgb-sh-cut",
+                                  "rgb-diffuse-full"])
+def test_view_cut_relighting_on_every_kind(kinds, name, interpolation):
+    """The view-cut frame of a 1- or n^2-coefficient, 1- or 3-channel, cut or full store: relit radiance equals the
+    float64 full-resolution reference at the active vertices, the kernel's e_lumi equals its float64 reference
+    (which reads the boxes' own width), and the cut stays legal over a short orbit. ``direct`` relights a
+    direct-only store by the direct term alone (``kernels.direct``); ``thesis`` blends the stored samples
+    (``kernels.runtime.relight``), against ``Runtime.radiance``'s numpy blend."""
     from lodprt.runtime.session import Runtime
     from lodprt.store.bake_store import open_store
 
-    rt = Runtime(open_store(kinds[name][1]), device="cpu", alpha=0.4)
+    rt = Runtime(open_store(kinds[name][1]), device="cpu", alpha=0.4, interpolation=interpolation)
     for a in np.linspace(0, 2 * np.pi, 5)[:-1]:
         eye = (0.6 * np.sin(a), 0.35, 0.6 * np.cos(a))
         rt.set_camera(eye, target=(0.0, 0.1, 0.0), width=200, height=150)
