@@ -243,6 +243,18 @@ def test_light_cut_with_indirect_light(tmp_path):
     assert (cut.coefficients(0)[under, 0, 0] > 0).all()
     dark = zarr.open_group(str(tmp_path / "cut.zarr"), mode="r")["samples/00000/dark"][...]
     assert not dark.any()  # every node carries indirect light
+    # the run time on the GI store (M-1 over the sample's residual, M-2: kernels.runtime.relight, then the direct
+    # term; the scene has one light sample): the view cut's frame equals Runtime.radiance's numpy blend
+    from lodprt.runtime.session import Runtime
+
+    rt = Runtime(cut, device="cpu")
+    rt.set_lights(cut.light_positions[:1])
+    eye = (0.0, 0.25, 1.2)
+    rt.set_camera(eye, target=(0.0, 0.1, 0.0), width=96, height=64)
+    fr = rt.update()
+    want = rt.radiance(eye)[fr.vertex_ids]
+    assert float(np.abs(want).max()) > 0
+    np.testing.assert_allclose(fr.radiance, want, atol=1e-4 * float(np.abs(want).max()), rtol=1e-3)
 
 
 def test_vertex_areas_sum_to_the_surface():
