@@ -166,6 +166,13 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
     # ready jobs, longest first (ties: the first in ``jobs``): one heap per kind of several jobs (their rates differ),
     # one for the kinds of one job (never measured while ready: all at the slowest rate known)
     single, multi, count = [], {}, [0]
+    # the slowest rate known and a kind that has it (None before any job has finished), kept as jobs finish: a max
+    # over every kind's rate at each take would cost O(kinds) there, O(jobs^2) over thousands of small components
+    slow = [None, None]
+
+    def rate_of(kind) -> float:
+        sec, n = rate[kind]
+        return sec / max(n, 1e-300)
 
     def push(k):
         key = (-(jobs[k].size + jobs[k].follow), k)
@@ -177,7 +184,7 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
             push(k)
 
     def take():
-        slowest = max((sec / max(n, 1e-300) for sec, n in rate.values()), default=1.0)
+        slowest = 1.0 if slow[0] is None else slow[0]
         best = None  # (probe, estimate, -index, heap)
         for many, kind, heap in [(False, None, single), *((True, kind, h) for kind, h in multi.items())]:
             if not heap:
@@ -186,7 +193,7 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
             known = many and kind in rate
             # a kind of several jobs none of which has run yet goes first: its rate is then known for the others
             probe = many and not known and not busy[kind]
-            cand = (probe, size * (rate[kind][0] / max(rate[kind][1], 1e-300) if known else slowest), -k, heap)
+            cand = (probe, size * (rate_of(kind) if known else slowest), -k, heap)
             if best is None or cand[:3] > best[:3]:
                 best = cand
         k = heapq.heappop(best[3])[1]
@@ -221,8 +228,15 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
             with lock:
                 running[0] -= 1
                 busy[jobs[k].kind] -= 1
-                r = rate.setdefault(jobs[k].kind, [0.0, 0.0])
+                kind = jobs[k].kind
+                r = rate.setdefault(kind, [0.0, 0.0])
                 r[0], r[1] = r[0] + time.perf_counter() - t, r[1] + float(jobs[k].size)
+                now = rate_of(kind)
+                if slow[0] is None or now >= slow[0]:
+                    slow[:] = [now, kind]
+                elif kind == slow[1]:  # the slowest kind got faster: the max over every kind again
+                    slow[1] = max(rate, key=rate_of)
+                    slow[0] = rate_of(slow[1])
                 left -= 1
                 for d in jobs[k].then:
                     waits[d] -= 1

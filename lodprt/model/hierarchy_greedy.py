@@ -268,7 +268,8 @@ class _Units:
             a.numpy().fill(-1)
         self.ctrs = {u: _counters(kh, self.nb_base[u], entries[u]) for u in self.todo}
         self.kind = {u: int(pieces[members[self.starts[u]]]) for u in self.todo}
-        self.done, self.unstarted, self.lock = [], len(self.todo), threading.Lock()
+        self.unstarted, self.lock = len(self.todo), threading.Lock()
+        self.collapses = 0  # made by the units done so far (a running total: ``made`` is asked after every job)
 
     def launch(self, s, q, u):
         """Build unit ``u`` with a thread's scratch ``s`` and queue ``q`` (made for this mesh's vertex count)."""
@@ -278,7 +279,8 @@ class _Units:
                   inputs=[self.m, s, q, self.t, self.nd, self.unit_wp, u, self.members_wp, int(self.starts[u]),
                           int(self.starts[u + 1] - self.starts[u]), int(self.node_base[u]), int(self.stop[u]),
                           EDGE_WEIGHT, FOLD_COS, SLIVER, MAX_VALENCE])
-        self.done.append(u)
+        with self.lock:
+            self.collapses += int(self.ctrs[u][1])
 
     def release(self) -> None:
         """Let the mesh, state and unit arrays go (every unit is done; ``finish`` needs none of them)."""
@@ -286,7 +288,7 @@ class _Units:
 
     def made(self) -> int:
         """Collapses made by the units done so far."""
-        return sum(int(self.ctrs[u][1]) for u in list(self.done))
+        return self.collapses
 
     def jobs(self, follow=None, after=None) -> list:
         """A ``Job`` per unit, each making the thread's scratch and queue for this mesh once (``follow``: kind -> the
@@ -391,7 +393,7 @@ def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, wor
     del fcomp, movable, m, t
     for u in tile.todo:
         rest[tile.kind[u]] += tile.moves[u] / REDUCE
-    lock, needed = threading.Lock(), [len(tile.todo) + len(comps)]
+    lock, needed, rest_made = threading.Lock(), [len(tile.todo) + len(comps)], [0]
 
     def done_with_full_size():  # once every tile is done and every component compacted, the full size goes
         with lock:
@@ -407,6 +409,8 @@ def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, wor
         compacted = _compacted(kh, kp, hold[0], hold[1], group, fidx[hold[0].alive.numpy()[fidx] != 0])
         done_with_full_size()
         results[a] = _rest(kh, compacted, group, target_base)
+        with lock:
+            rest_made[0] += results[a]["made"]
 
     jobs, results = tile.jobs({int(a): rest[a] for a in comps}, after=done_with_full_size), {}
     at_job = {}
@@ -416,7 +420,7 @@ def _two_phases(kh, kp, hold, nd_arr, tiles, group, pieces, at, target_base, wor
     for k, u in enumerate(tile.todo):
         jobs[k].then.append(at_job[tile.kind[u]])
         jobs[at_job[tile.kind[u]]].waits += 1
-    run_jobs(jobs, workers, lambda: report(tile.made() + sum(r["made"] for r in list(results.values()))))
+    run_jobs(jobs, workers, lambda: report(tile.made() + rest_made[0]))
     at, recorded, rounds = tile.finish(arr, [r["standing"] for r in results.values()])
     for a in sorted(results):
         at = _merged(arr, at, results[a])
