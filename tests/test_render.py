@@ -248,6 +248,26 @@ def test_no_gl_errors_in_any_mode(bunny_store, renderer):
     assert renderer.ctx.error == "GL_NO_ERROR"
 
 
+def test_one_renderer_draws_at_any_size_in_turn(bunny_store):
+    """One Renderer drawing frames of other sizes in turn (each size replaces the offscreen target of its kind):
+    no OpenGL error, and every image is the one a fresh Renderer draws at that size. Releasing the bound target
+    before making the next one left GL_INVALID_OPERATION (moderngl binds the last bound name again), which
+    ``image`` raised on the first frame of a new size."""
+    sizes = [(256, 256), (320, 200), (256, 256), (96, 160)]
+    frames = [full_frame(bunny_store, Camera(eye=CAM.eye, target=CAM.target, fov=CAM.fov, width=w, height=h),
+                         sample=4) for w, h in sizes]
+    with Renderer() as r:  # one kind after the other: the target replaced is the one bound
+        lins = [r.image(f, linear=True) for f in frames]
+        got = list(zip(lins, [r.image(f) for f in frames]))
+        assert r.ctx.error == "GL_NO_ERROR"
+    for f, (lin, srgb), (w, h) in zip(frames, got, sizes):
+        assert lin.shape == srgb.shape == (h, w, 3)
+        with Renderer() as fresh:
+            np.testing.assert_array_equal(lin, fresh.image(f, linear=True))
+            np.testing.assert_array_equal(srgb, fresh.image(f))
+        assert lin.max() > 0  # something was drawn
+
+
 @pytest.mark.parametrize("order", [1, 2, 3, 5, 8])
 def test_shader_sh_basis_matches_numpy(renderer, order):
     """The generated GLSL basis equals lodprt.sh.basis at every order the shader offers (a wide-angle quad whose

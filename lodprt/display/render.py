@@ -399,15 +399,19 @@ class Renderer:
     def _offscreen(self, size: tuple[int, int], linear: bool):
         key = (size, linear)
         if key not in self._fbos:
-            for old in [k for k in self._fbos if k[1] == linear]:  # one cached target per kind
-                self._release_fbo(self._fbos.pop(old))
             size = check_size(size, self.ctx)
             colour = self.ctx.renderbuffer(size, 4, dtype="f4" if linear else "f1")
             try:
-                self._fbos[key] = self.ctx.framebuffer([colour], self.ctx.depth_renderbuffer(size))
+                fbo = self.ctx.framebuffer([colour], self.ctx.depth_renderbuffer(size))
             except Exception as exc:  # moderngl.Error: out of memory for a size within the limits
                 colour.release()
                 raise LodprtError(f"size {size[0]} x {size[1]}: cannot make an offscreen framebuffer ({exc})") from exc
+            # one cached target per kind; the new one is bound before the old is released: moderngl binds again
+            # the framebuffer it last bound after making one, and a released name is GL_INVALID_OPERATION there
+            fbo.use()
+            for old in [k for k in self._fbos if k[1] == linear]:
+                self._release_fbo(self._fbos.pop(old))
+            self._fbos[key] = fbo
         return self._fbos[key]
 
     @staticmethod
