@@ -233,6 +233,34 @@ def test_cli_target_off_and_budget(bunny_bake):
         Runtime(open_store(bunny_bake), device="cpu", triangle_budget=4000, target_psnr=30)
 
 
+@pytest.mark.parametrize("interpolation", ["direct", "thesis"])
+def test_a_black_light_is_a_black_frame_at_the_target(bunny_bake, interpolation):
+    """Every light black (colour 0, legal): no sample carries weight, yet the default (steered to its target) and
+    a moving frame make a black frame that meets any target (E-3 inf) on the base cut, with the full mesh black too;
+    E-4's per-node shares (``node_mean_square``) used to reduce over no sample and raise."""
+    from lodprt.runtime import frame_error
+    from lodprt.runtime.camera import Camera, default_eye, scene_centre
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(bunny_bake)
+    light, black = store.light_positions[[0, 1, 3, 4]].mean(0)[None], np.zeros((1, 3))
+    rt = Runtime(store, device="cpu", interpolation=interpolation)
+    assert rt.steering is not None
+    rt.set_lights(light, black)
+    for k in range(3):  # the first frame (E-5), then frames in motion with E-4 due on the first of them
+        rt.set_camera(Camera(eye=tuple(np.asarray(default_eye(store)) * (1.0 + 0.05 * k)),
+                             target=scene_centre(store), width=160, height=120))
+        frame = rt.update()
+        assert not np.any(frame.radiance) and not np.any(frame.coefficients)
+        assert frame.stats["triangles"] > 0
+    assert rt.estimated_psnr == float("inf")
+    coarse = np.flatnonzero(rt.cut.active)
+    coarse = coarse[coarse >= store.num_vertices]
+    assert len(rt.used_samples) == 0 and len(coarse)
+    assert not np.any(frame_error.node_mean_square(rt, coarse))
+
+
 @pytest.mark.warp_debug
 def test_relit_any_vertex_is_what_the_full_mesh_frame_draws(bunny_bake):
     """E-1 relights any vertex (``Runtime.relit``): at the cut's vertices it is the frame's own coefficients and

@@ -532,6 +532,8 @@ def node_mean_square(rt, nodes: np.ndarray) -> np.ndarray:
     values combined like S-2's bounds: sum_j |W_jc| rms_jc for T-12, max over the samples around the light times
     sum_j |W_jc| for a direct interpolation (M-5); the largest channel, squared."""
     cache, h = rt.samples, rt.h
+    if not len(rt.used_samples):  # every light black (zero colours): no sample carries weight, nothing to miss
+        return np.zeros(len(nodes), np.float64)
     derive_mean_square(rt)
     rms = np.sqrt(cache.derived["detail_ms"][0][nodes - h.num_vertices][:, rt.used_slots].astype(np.float32))
     w = np.abs(rt.sample_weights[rt.used_samples])  # (U, 3)
