@@ -248,6 +248,45 @@ def test_no_gl_errors_in_any_mode(bunny_store, renderer):
     assert renderer.ctx.error == "GL_NO_ERROR"
 
 
+def test_orders_above_the_shaders_draw_per_vertex(bunny_store, renderer):
+    """SH orders above the shaders' (8) draw per vertex, the radiance evaluated in numpy: an order-9 frame whose
+    coefficients past order 4 are 0 draws what the order-4 frame draws per vertex in GLSL (an independent
+    evaluation of the same sum); per fragment it is a clear error naming --per-vertex."""
+    import dataclasses
+
+    frame = full_frame(bunny_store, CAM, sample=4)
+    wide = np.zeros(frame.coefficients.shape[:2] + (81,), np.float32)
+    wide[:, :, : frame.coefficients.shape[2]] = frame.coefficients
+    big = dataclasses.replace(frame, coefficients=wide)
+    ref = renderer.image(frame, linear=True, per_vertex=True)
+    got = renderer.image(big, linear=True, per_vertex=True)
+    assert ref.max() > 0
+    np.testing.assert_allclose(got, ref, rtol=1e-3, atol=1e-5 * float(ref.max()))  # GLSL float32 against numpy
+    with pytest.raises(LodprtError, match="--per-vertex"):
+        renderer.image(big, linear=True)
+
+
+def test_renderers_side_by_side_each_draw_in_their_own_context(bunny_store):
+    """Two Renderers in one process, used in turn, and one made and released while another lives: each draws the
+    image a lone Renderer draws. A new (or released) context is left current, and the first renderer's calls went
+    there: GL_INVALID_OPERATION, raised by ``image``."""
+    frame = full_frame(bunny_store, CAM, sample=4)
+    with Renderer() as lone:
+        ref = lone.image(frame, linear=True)
+    first = Renderer()
+    try:
+        np.testing.assert_array_equal(first.image(frame, linear=True), ref)  # its targets made in its context
+        with Renderer() as other:
+            np.testing.assert_array_equal(other.image(frame, linear=True), ref)
+            np.testing.assert_array_equal(first.image(frame, linear=True), ref)  # the other alive, made last
+            np.testing.assert_array_equal(other.image(frame, linear=True), ref)
+        np.testing.assert_array_equal(first.image(frame, linear=True), ref)  # the other released
+        assert first.ctx.error == "GL_NO_ERROR"
+    finally:
+        first.release()
+    assert ref.max() > 0
+
+
 def test_one_renderer_draws_at_any_size_in_turn(bunny_store):
     """One Renderer drawing frames of other sizes in turn (each size replaces the offscreen target of its kind):
     no OpenGL error, and every image is the one a fresh Renderer draws at that size. Releasing the bound target
@@ -366,6 +405,70 @@ def test_cli_turntable_sequence_and_gif(cut_store, tmp_path):
     assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "t.gif")]) == 0
     assert Image.open(tmp_path / "t.gif").n_frames == 4
     assert main(["turntable", str(cut_store), *view, "-o", str(tmp_path / "seq")]) == 2  # not empty: no clobber
+
+
+SMALL = ["--eye", "0.05", "0.3", "0.45", "--size", "32", "24"]
+
+
+def test_cli_turntable_bad_fps_touches_nothing(cut_store, tmp_path, capsys, monkeypatch):
+    """--fps 0, -1, nan (and a rate slower than a GIF's delay holds) are refused for every output kind in one line
+    naming --fps, before any file is written; a good GIF under --overwrite stays as it was, also when writing the
+    new GIF fails part way (it is written to a partial file renamed into place)."""
+    from pathlib import Path
+
+    import imageio.v3 as iio
+
+    from lodprt.cli.main import main
+
+    gif = tmp_path / "t.gif"
+    assert main(["turntable", str(cut_store), *SMALL, "--frames", "2", "-o", str(gif)]) == 0
+    good = gif.read_bytes()
+    capsys.readouterr()
+    for fps, out in [("0", gif), ("-1", gif), ("nan", gif), ("0.001", gif), ("0", tmp_path / "new.gif"),
+                     ("-1", tmp_path / "seq"), ("nan", tmp_path / "v.mp4"), ("inf", tmp_path / "x.exr")]:
+        assert main(["turntable", str(cut_store), *SMALL, "--frames", "2", "--fps", fps, "-o", str(out),
+                     "--overwrite"]) == 2, fps
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and err.startswith("lodprt turntable: error: --fps "), err
+    assert gif.read_bytes() == good
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.gif"]  # no new file, no partial file
+
+    def broken_writer(path, *args, **kw):  # writes part of a file, then fails as Pillow did on a bad duration
+        Path(path).write_bytes(b"GIF89a")
+        raise OverflowError("int too big to convert")
+
+    monkeypatch.setattr(iio, "imwrite", broken_writer)
+    with pytest.raises(OverflowError):
+        main(["turntable", str(cut_store), *SMALL, "--frames", "2", "-o", str(gif), "--overwrite"])
+    assert gif.read_bytes() == good
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.gif"]
+
+
+def test_cli_turntable_overwrite_removes_stale_frames(cut_store, tmp_path, capsys):
+    """A shorter turntable with --overwrite over a PNG folder (or an EXR sequence) removes the longer run's numbered
+    frames it did not write and says how many; other files, even frame-like names it never writes, stay."""
+    import importlib.util
+
+    from lodprt.cli.main import main
+
+    seq = tmp_path / "seq"
+    assert main(["turntable", str(cut_store), *SMALL, "--frames", "3", "-o", str(seq)]) == 0
+    for name in ("notes.txt", "frame_7.png", "frame_00005.png", "frame_0009.jpg"):
+        (seq / name).write_text("keep")
+    capsys.readouterr()
+    assert main(["turntable", str(cut_store), *SMALL, "--frames", "2", "-o", str(seq), "--overwrite"]) == 0
+    assert "removed 1 stale frame" in capsys.readouterr().out
+    assert sorted(p.name for p in seq.iterdir()) == ["frame_0000.png", "frame_00005.png", "frame_0001.png",
+                                                     "frame_0009.jpg", "frame_7.png", "notes.txt"]
+    assert main(["turntable", str(cut_store), *SMALL, "--frames", "2", "-o", str(seq)]) == 2  # no --overwrite
+    if importlib.util.find_spec("OpenEXR") is None:
+        return
+    exr = tmp_path / "x.exr"
+    assert main(["turntable", str(cut_store), *SMALL, "--frames", "3", "-o", str(exr)]) == 0
+    (tmp_path / "x_0002.exr.bak").write_text("keep")
+    assert main(["turntable", str(cut_store), *SMALL, "--frames", "1", "-o", str(exr), "--overwrite"]) == 0
+    assert "removed 2 stale frames" in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.glob("x_*")) == ["x_0000.exr", "x_0002.exr.bak"]
 
 
 def test_cli_render_sample_shows_the_stored_sample(cut_store, tmp_path, capsys):

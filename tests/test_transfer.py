@@ -360,6 +360,16 @@ def test_cli_short_forms_bake_and_render_with_environment(tmp_path, capsys, gl):
     assert "point-light options" in capsys.readouterr().err
     assert main(["render", str(out), "--environment", "sky:16", "-o", str(tmp_path / "y.png")]) == 2
     assert "--eye" in capsys.readouterr().err
+    eye = ["--eye", "0", "1", "4", "--size", "48", "32"]
+    for extra, named in ((["--full"], "--full"), (["--per-vertex", "--wireframe"], "--wireframe, --per-vertex"),
+                         (["--exposure", "1"], "--exposure"), (["--up", "1", "0", "0"], "--up"),
+                         (["--no-markers"], "--no-markers")):  # used to be dropped without a word
+        assert main(["render", str(out), "--environment", "stored", *eye, *extra, "-o", str(tmp_path / "z.png")]) == 2
+        assert f"{named}: not with --environment" in capsys.readouterr().err
+    for name in ("z.npy", "z.EXR"):  # the point-light frame's linear outputs
+        assert main(["render", str(out), "--environment", "stored", *eye, "-o", str(tmp_path / name)]) == 2
+        assert "writes a .png" in capsys.readouterr().err
+    assert not list(tmp_path.glob("z.*"))
 
 
 @pytest.fixture(scope="module")

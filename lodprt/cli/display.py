@@ -3,6 +3,8 @@ the full-resolution radiance), render, compare, turntable and view (moving point
 
 from __future__ import annotations
 
+import os
+
 from lodprt.cli import args as cli_args
 from lodprt.cli import environment as environment_cli
 from lodprt.runtime.camera import PATH_FRAMES, PATHS
@@ -66,7 +68,8 @@ def _add_render(sub) -> None:
                     "thesis interpolation: exactly that sample's coefficients), instead of --light")
     rn.add_argument("--environment", default=None, metavar="ENV",
                     help="OUT is a transfer store (bake --environment): relight it by this environment instead of point "
-                    "lights (as render-environment; 'stored' uses the bake's own)")
+                    "lights (as render-environment; 'stored' uses the bake's own); needs --eye, writes a .png, and "
+                    "takes of the drawing options only --target, --fov, --size and --white")
     rn.add_argument("--rotate", type=float, default=0.0, metavar="DEG", help="with --environment: turn it about +y by DEG degrees")
     rn.set_defaults(handler=cmd_render)
 
@@ -198,8 +201,19 @@ def _render_environment(args) -> int:
     """``render OUT --environment ENV``: a transfer store relit by an environment, as render-environment."""
     if args.light or args.sample is not None:
         raise LodprtError("--light/--sample and --environment exclude each other (point lights or an environment)")
-    if args.eye is None:
-        raise LodprtError("--environment needs --eye X Y Z")
+    if args.eye is None:  # a transfer store keeps no mesh bounds to frame a default view from
+        raise LodprtError("--environment needs --eye X Y Z (the default view is a point-light store's)")
+    # the point lights' drawing options have no meaning for a transfer store: refused, not silently dropped
+    unused = [flag for flag, on in (("--full", args.full), ("--wireframe", args.wireframe),
+                                    ("--per-vertex", args.per_vertex), ("--no-markers", args.no_markers),
+                                    ("--exposure", args.exposure != 0.0), ("--color", bool(args.color)),
+                                    ("--up", tuple(args.up) != (0.0, 1.0, 0.0))) if on]
+    if unused:
+        raise LodprtError(f"{', '.join(unused)}: not with --environment (a transfer store is drawn as "
+                          "render-environment draws it)")
+    if str(args.out).lower().endswith((".npy", ".exr")):
+        raise LodprtError(f"{args.out}: --environment writes a .png (the .npy and .exr outputs are point-light "
+                          "frames')")
     return environment_cli.render_environment(
         args.store, args.out, eye=args.eye, environment=None if args.environment == "stored" else args.environment,
         rotate=args.rotate, target=args.target, fov=args.fov, size=args.size, white=args.white,
@@ -222,15 +236,18 @@ def cmd_compare(args) -> int:
 
 
 def cmd_turntable(args) -> int:
-    from lodprt.display.pictures import turntable
+    from lodprt.display.pictures import check_fps, turntable
     from lodprt.store.bake_store import open_store
 
+    check_fps(args.fps, os.path.splitext(str(args.out or ""))[1])  # a bad --fps fails before the store is opened
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
-    written = turntable(store, args.out, lights=lights, colors=colors, camera=camera, frames=args.frames,
-                        light_turns=args.light_turns, fps=args.fps, lod=not args.full, overwrite=args.overwrite,
-                        **_view_cut(args), **_draw_options(args))
-    print(f"wrote {written}")
+    written, stale = turntable(store, args.out, lights=lights, colors=colors, camera=camera, frames=args.frames,
+                               light_turns=args.light_turns, fps=args.fps, lod=not args.full,
+                               overwrite=args.overwrite, **_view_cut(args), **_draw_options(args))
+    # --overwrite over a longer sequence: say how many of its numbered frames were removed
+    removed = f" (removed {stale} stale frame{'s' * (stale != 1)} of an earlier run)" if stale else ""
+    print(f"wrote {written}{removed}")
     return 0
 
 

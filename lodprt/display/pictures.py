@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import re
 import time
 from pathlib import Path
 
@@ -23,13 +24,16 @@ log = logging.getLogger(__name__)
 
 
 def check_output(path, suffixes: tuple[str, ...], *, overwrite: bool) -> Path:
-    """The output path, refused (LodprtError naming it) for a wrong suffix, a missing folder, or an existing file
-    without ``overwrite``."""
+    """The output path, refused (LodprtError naming it) for a wrong suffix, a missing folder, a folder, or an
+    existing file without ``overwrite``."""
     path = Path(path)
     if path.suffix.lower() not in suffixes:
         raise LodprtError(f"{path}: the output must end in {' or '.join(suffixes)}")
     if not path.parent.is_dir():
         raise LodprtError(f"{path}: the folder {path.parent} does not exist")
+    if path.is_dir():  # a file never replaces a folder, overwrite or not
+        raise LodprtError(f"{path}: is a folder; the output must be a file (overwrite replaces a file, never a "
+                          "folder)")
     if path.exists() and not overwrite:
         raise LodprtError(f"{path}: already exists; pass overwrite=True to replace it")
     return path
@@ -74,6 +78,55 @@ def save_image(path, image: np.ndarray) -> None:
 
 
 VIDEO_EXTRA = "pip install 'lodprt[video]'"
+#: a GIF stores each frame's delay as a 16-bit count of hundredths of a second: the slowest rate it can hold
+GIF_MIN_FPS = 100.0 / 65535
+
+
+def check_fps(fps, suffix: str = "") -> float:
+    """``fps`` as a float, refused (LodprtError naming --fps) unless a finite positive number: the one check every
+    turntable output makes before any work, the frame rate of ``suffix`` ".gif" also no slower than a GIF holds."""
+    try:
+        rate = float(fps)
+    except (TypeError, ValueError):
+        rate = float("nan")
+    if not (np.isfinite(rate) and rate > 0):
+        raise LodprtError(f"--fps {fps}: must be a positive number of frames per second")
+    if suffix.lower() == ".gif" and rate < GIF_MIN_FPS:
+        raise LodprtError(f"--fps {fps}: a GIF holds no slower rate than {GIF_MIN_FPS:.4g} frames per second")
+    return rate
+
+
+def partial_path(path: Path) -> Path:
+    """The hidden file beside ``path`` an output is written to before it is renamed into place."""
+    return path.with_name(f".{path.stem}.partial{path.suffix}")
+
+
+@contextlib.contextmanager
+def written_in_place(path):
+    """Yield ``path``'s partial file to write; when the block ends it is renamed onto ``path`` (os.replace: an old
+    file there stays whole until then), when it raises it is removed and ``path`` is left as it was."""
+    partial = partial_path(Path(path))
+    try:
+        yield partial
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    os.replace(partial, path)
+
+
+def remove_stale_frames(folder: Path, prefix: str, suffix: str, frames: int) -> int:
+    """Remove from ``folder`` the numbered frames ``{prefix}{k:04d}{suffix}`` with k >= ``frames`` that an earlier,
+    longer turntable left (only files named exactly as the turntable names its frames; nothing else is touched).
+    Returns how many were removed."""
+    pattern = re.compile(re.escape(prefix) + r"(\d{4,})" + re.escape(suffix))
+    removed = 0
+    for path in sorted(folder.iterdir()):
+        m = pattern.fullmatch(path.name)
+        # f"{k:04d}" round trip: "frame_00001.png" is no name the turntable writes
+        if m and f"{int(m[1]):04d}" == m[1] and int(m[1]) >= frames and path.is_file():
+            path.unlink()
+            removed += 1
+    return removed
 
 
 def even_frame(image: np.ndarray) -> np.ndarray:
@@ -94,10 +147,8 @@ class VideoWriter:
             import imageio_ffmpeg
         except ImportError as exc:
             raise LodprtError(f"{self.path}: writing .mp4 needs the optional imageio-ffmpeg; {VIDEO_EXTRA}") from exc
-        if not (np.isfinite(fps) and fps > 0):
-            raise LodprtError(f"--fps {fps}: must be a positive number of frames per second")
-        self.ffmpeg, self.fps = imageio_ffmpeg, fps
-        self.partial = self.path.with_name(f".{self.path.stem}.partial.mp4")
+        self.ffmpeg, self.fps = imageio_ffmpeg, check_fps(fps)
+        self.partial = partial_path(self.path)
         self.gen = None
         self.frames = 0
 
@@ -158,14 +209,18 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
               fps: float = 12.0, error_bound: float | None = None, alpha: float | None = None, lod: bool = True,
               criterion="screen", interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None,
               outside: str = "clamp",
-              overwrite: bool = False, **draw) -> Path:
+              overwrite: bool = False, **draw) -> tuple[Path, int]:
     """``lodprt turntable``: ``frames`` views of one camera orbit about the target's vertical axis, the lights
     turning ``light_turns`` times the other way about the same axis (clamped to the sampled light region by the
     run time). ``out`` a folder (created; frame_0000.png, ...), a .gif (imageio), an .mp4 (H.264 through the
     optional imageio-ffmpeg, ``VideoWriter``; odd sizes padded to even) or ``NAME.exr``: the linear radiance of
     every frame as OpenEXR float32 RGB, ``NAME_0000.exr``, ``NAME_0001.exr``, ... beside it (the ``exr`` extra). One run time for the whole orbit, so the
-    view cut moves incrementally from frame to frame and the white point stays fixed."""
+    view cut moves incrementally from frame to frame and the white point stays fixed. A GIF or MP4 is written to a
+    partial file renamed into place at the end (a failed run replaces nothing); with ``overwrite`` the numbered
+    frames of a sequence that this run did not write (an earlier, longer one's) are removed. Returns the path written
+    and how many such stale frames were removed."""
     out = Path(out)
+    check_fps(fps, out.suffix)  # every output kind, before any file is touched or frame drawn
     if frames < 1:
         raise LodprtError(f"--frames {frames}: must be >= 1")
     gif, video, exr = out.suffix.lower() == ".gif", None, None
@@ -209,8 +264,15 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
         if video is not None:
             video.close()
     if gif:
-        iio.imwrite(out, np.stack(images), duration=1000.0 / fps, loop=0)
-    return out if exr is None else exr[0].with_name(f"{out.stem}_0000..{frames - 1:04d}.exr")
+        with written_in_place(out) as partial:
+            iio.imwrite(partial, np.stack(images), extension=".gif", duration=1000.0 / fps, loop=0)
+    removed = 0
+    if exr is not None:
+        removed = remove_stale_frames(out.parent, f"{out.stem}_", ".exr", frames) if overwrite else 0
+        out = exr[0].with_name(f"{out.stem}_0000..{frames - 1:04d}.exr")
+    elif not gif and video is None:
+        removed = remove_stale_frames(out, "frame_", ".png", frames) if overwrite else 0
+    return out, removed
 
 
 def exr_sequence(out: Path, frames: int, *, overwrite: bool) -> list[Path]:

@@ -13,7 +13,9 @@ first row is its top.
 
 from __future__ import annotations
 
+import functools
 import logging
+import threading
 
 import numpy as np
 
@@ -310,9 +312,36 @@ def create_context(backend: str = "egl"):
     except ImportError as exc:  # pragma: no cover - moderngl is a dependency
         raise LodprtError(f"moderngl is not installed ({exc})") from exc
     try:
-        return moderngl.create_standalone_context(require=330, backend=backend)
+        ctx = moderngl.create_standalone_context(require=330, backend=backend)
     except Exception as exc:
         raise LodprtError(f"cannot create an offscreen OpenGL 3.3 context ({backend.upper()}): {exc}") from exc
+    _CURRENT.ctx = ctx  # a new context is current
+    return ctx
+
+
+#: per thread, the moderngl context lodprt last made current (``create_context`` makes its new one current,
+#: ``_make_current`` a renderer's before its GL calls)
+_CURRENT = threading.local()
+
+
+def _make_current(ctx) -> None:
+    """Make ``ctx`` the thread's current OpenGL context unless lodprt made it so last. Making or releasing another
+    (a second Renderer) leaves that one current, and this renderer's GL calls would go there (GL_INVALID_OPERATION
+    on names it does not know). Entered without a matching exit: on EGL, moderngl's exit restores a saved context,
+    and a nested enter and exit left the context drawing garbage (seen with moderngl 5.13)."""
+    if getattr(_CURRENT, "ctx", None) is not ctx:
+        ctx.__enter__()
+        _CURRENT.ctx = ctx
+
+
+def _in_context(method):
+    """``method`` run with the renderer's context current (``_make_current``)."""
+    @functools.wraps(method)
+    def run(self, *args, **kw):
+        _make_current(self.ctx)
+        return method(self, *args, **kw)
+
+    return run
 
 
 class Renderer:
@@ -328,10 +357,12 @@ class Renderer:
 
     def __init__(self, ctx=None, *, backend: str = "egl"):
         self.ctx = ctx if ctx is not None else create_context(backend)
+        _make_current(self.ctx)
         self._owns = ctx is None
         self._programs: dict = {}
         self._fbos: dict = {}
         self._uploaded = None  # (id(frame), buffers) of the last frame sent to the GPU
+        self._stand_in = None  # (frame, eye, stand-in) of ``_drawable``'s last order-above-the-shaders frame
         self._marker = self.ctx.program(vertex_shader=_MARKER_VERTEX, fragment_shader=_MARKER_FRAGMENT)
 
     # -- resources ------------------------------------------------------------------------------------------
@@ -387,6 +418,33 @@ class Renderer:
         self._uploaded = (frame, up)
         return up
 
+    def _drawable(self, frame, cam, per_vertex: bool):
+        """``frame``, or, for SH orders above the shaders' (_MAX_ORDER) drawn per vertex, a stand-in whose one
+        coefficient per channel is the vertex's radiance toward ``cam``'s eye evaluated here (T-7 in numpy, any
+        order) over y_0, which the shader's y_0 term gives back: the same picture. Per fragment such orders are a
+        clear error naming ``--per-vertex``."""
+        import dataclasses
+
+        coef = np.asarray(frame.coefficients)
+        if coef.ndim != 3 or coef.shape[2] <= _MAX_ORDER * _MAX_ORDER:
+            return frame
+        if not per_vertex:
+            raise LodprtError(f"frame coefficients: {coef.shape[2]} per channel; per-fragment shading evaluates "
+                              f"SH orders 1..{_MAX_ORDER}: draw it per vertex (--per-vertex, per_vertex=True)")
+        eye = tuple(float(x) for x in cam.eye)
+        held = self._stand_in
+        if held is not None and held[0] is frame and held[1] == eye:
+            return held[2]
+        from lodprt.store.bake_store import radiance_toward
+
+        pos = np.asarray(frame.positions)
+        nrm = np.zeros_like(pos) if frame.normals is None else frame.normals
+        rad = radiance_toward(pos, nrm, coef, eye, np.ones(3))  # (A, 3)
+        y0 = 0.28209479177387814  # the constant SH basis function, 1 / (2 sqrt(pi))
+        stand_in = dataclasses.replace(frame, coefficients=(rad / y0)[:, :, None].astype(np.float32))
+        self._stand_in = (frame, eye, stand_in)
+        return stand_in
+
     def _free_upload(self):
         if self._uploaded is not None:
             up = self._uploaded[1]
@@ -422,6 +480,7 @@ class Renderer:
             att.release()
 
     # -- drawing --------------------------------------------------------------------------------------------
+    @_in_context
     def draw(self, frame, *, target=None, camera=None, per_vertex: bool = False, linear: bool = False,
              exposure: float = 0.0, white: float | None = None, wireframe: bool = False,
              wire_color=(0.0, 0.8, 1.0), light_markers: bool = True, background=(0.0, 0.0, 0.0)) -> dict:
@@ -439,7 +498,7 @@ class Renderer:
         size = (int(cam.width), int(cam.height))
         if target is None:
             target = self._offscreen(size, linear)
-        up = self._upload(frame)
+        up = self._upload(self._drawable(frame, cam, per_vertex))
         pos = np.asarray(frame.positions, np.float64)
         lights = np.asarray(frame.lights, np.float64).reshape(-1, 3) if frame.lights is not None else np.zeros((0, 3))
         view, proj = camera_matrices(cam, np.vstack([pos, lights]) if light_markers and not linear else pos)
@@ -488,6 +547,7 @@ class Renderer:
             buf.release()
         return {"white": float(white), "triangles": int(up["count"] // 3), "gl_error": ctx.error}
 
+    @_in_context
     def image(self, frame, *, linear: bool = False, **kw) -> np.ndarray:
         """Draw offscreen and read back: (H, W, 3) uint8 sRGB, or float32 linear radiance with ``linear``;
         row 0 is the top of the image. Keywords as ``draw``."""
@@ -505,6 +565,7 @@ class Renderer:
 
     def release(self) -> None:
         """Free the GPU resources (and the context when this renderer created it)."""
+        _make_current(self.ctx)  # freed in this renderer's context, whichever was current
         self._free_upload()
         for fbo in self._fbos.values():
             self._release_fbo(fbo)
@@ -514,6 +575,7 @@ class Renderer:
         self._programs = {}
         if self._owns:
             self.ctx.release()
+            _CURRENT.ctx = None
 
     def __enter__(self):
         return self
