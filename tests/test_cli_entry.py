@@ -4,6 +4,7 @@ machine, the light box in ``info``, and the defaults the API shares with the com
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -162,3 +163,96 @@ def test_overwrite_errors_name_the_argument_or_the_flag(ball, ball_store, tmp_pa
         lodprt.bake(lodprt.load_scene(ball), ball_store[0], sh_order=2, device="cpu")
     r = run_cli("bake", ball, "-o", ball_store[0], "--sh-order", "2")
     assert r.returncode == 2 and "pass --overwrite to replace it" in r.stderr and "overwrite=True" not in r.stderr
+
+
+def cli(argv, capsys):
+    """``lodprt ARGV`` in this process: (exit code, stdout, stderr)."""
+    from lodprt.cli.main import main
+
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def refuse_work(monkeypatch):
+    """Make reading a store fail loudly: a command refused before any work never gets there."""
+    import lodprt.store.bake_store as bake_store
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the store was read before the output path was checked")
+
+    monkeypatch.setattr(bake_store, "open_store", no_work)
+
+
+EYE = ("--eye", 0, 1, 2)
+
+
+@pytest.mark.parametrize("argv", [("radiance", "--sample", 0, *EYE, "-o", "{out}.npy"),
+                                  ("diff", "--sample", 0, *EYE, "--size", 32, 24, "-o", "{out}.png")])
+def test_output_in_a_missing_folder_is_refused_before_any_work(ball_store, tmp_path, monkeypatch, capsys, argv):
+    """radiance and diff check OUT's folder first (diff's full-resolution re-bake, radiance's np.save traceback):
+    one line, exit 2, the wording of the other commands, nothing read."""
+    refuse_work(monkeypatch)
+    out = tmp_path / "nope" / "x"
+    rc, _, err = cli([argv[0], ball_store[0], *(str(a).format(out=out) for a in argv[1:])], capsys)
+    assert rc == 2 and err.count("\n") == 1, err
+    assert f"the folder {tmp_path / 'nope'} does not exist" in err and not (tmp_path / "nope").exists()
+
+
+@pytest.mark.parametrize("argv", [("radiance", "--sample", 0, *EYE, "-o", "{out}.npy"),
+                                  ("radiance", "--sample", 0, *EYE, "-o", "{out}.NPY"),
+                                  ("diff", "--sample", 0, *EYE, "--size", 32, 24, "-o", "{out}.png")])
+def test_output_that_is_a_folder_is_refused_even_with_overwrite(ball_store, tmp_path, monkeypatch, capsys, argv):
+    """An OUT that is a folder is never replaced by the file (it was an IsADirectoryError traceback): one line
+    naming it, exit 2, before any work, the folder kept."""
+    refuse_work(monkeypatch)
+    argv = [str(a).format(out=tmp_path / "x") for a in argv]
+    folder = Path(argv[-1])
+    (folder / "keep").mkdir(parents=True)
+    rc, _, err = cli([argv[0], ball_store[0], *argv[1:], "--overwrite"], capsys)
+    assert rc == 2 and err.count("\n") == 1 and f"{folder}: is a folder; the output must be a file" in err, err
+    assert (folder / "keep").is_dir()
+
+
+def test_radiance_takes_an_upper_case_suffix(ball_store, tmp_path, capsys):
+    """-o R.NPY is a .npy (as render and export take .PNG, .GLB): written under that very name."""
+    out = tmp_path / "R.NPY"
+    rc, stdout, err = cli(["radiance", ball_store[0], "--sample", 0, *EYE, "-o", out], capsys)
+    assert rc == 0, err
+    assert [p.name for p in tmp_path.iterdir()] == ["R.NPY"] and f"wrote {out}" in stdout
+    from lodprt.store.bake_store import open_store
+
+    np.testing.assert_array_equal(np.load(out), open_store(ball_store[0]).radiance(0, (0, 1, 2)))
+
+
+def test_compress_reports_the_input_as_stored_and_a_growth_as_larger(ball_store, tmp_path, capsys):
+    """compress from a q8 store: 'was' is the q8 store's bytes per sample (not its float32 size), and re-encoding
+    it larger (codec none) says 'larger', not '0.4x smaller'."""
+    from lodprt.store.bake_store import open_store
+
+    q8, back = tmp_path / "q8.zarr", tmp_path / "back.zarr"
+    assert cli(["compress", ball_store[0], "-o", q8, "--codec", "q8"], capsys)[0] == 0
+    info, raw = open_store(q8).info(), open_store(ball_store[0]).info()
+    n = len(info["samples"])
+    stored, float32 = (info["bytes_total"] + info["codec_bytes"]) / n / 1024, raw["bytes_total"] / n / 1024
+    assert stored < float32 / 1.5
+    rc, _, err = cli(["compress", q8, "-o", back, "--codec", "none"], capsys)
+    assert rc == 0, err
+    assert f"{float32:,.1f} KiB per sample (was {stored:,.1f} KiB, {float32 / stored:.1f}x larger;" in err, err
+    rc, _, err = cli(["compress", q8, "-o", tmp_path / "again.zarr", "--codec", "q8"], capsys)
+    assert rc == 0 and f"(was {stored:,.1f} KiB, the same size;" in err, err
+
+
+@pytest.mark.parametrize("command, suffix", [("render", ".png"), ("render", ".npy"), ("compare", ".png"),
+                                             ("export", ".glb")])
+def test_drawn_output_that_is_a_folder_is_refused(ball_store, tmp_path, capsys, command, suffix, gl):
+    """render, compare and export refuse an OUT that is a folder as the other commands do (their check,
+    ``pictures.check_output``, let it through to an IsADirectoryError traceback): one line, exit 2, folder kept."""
+    from lodprt.store.bake_store import open_store
+
+    light = open_store(ball_store[0]).light_positions[0]
+    folder = tmp_path / f"x{suffix}"
+    (folder / "keep").mkdir(parents=True)
+    rc, _, err = cli([command, ball_store[0], "--light", *light, *EYE, "-o", folder, "--overwrite"], capsys)
+    assert rc == 2 and err.count("\n") == 1 and f"{folder}: is a folder; the output must be a file" in err, err
+    assert (folder / "keep").is_dir()

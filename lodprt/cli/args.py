@@ -178,22 +178,35 @@ def at_least(flag: str, value, low: int, note: str = "") -> None:
         raise LodprtError(f"{flag} {value}: must be >= {low}{note}")
 
 
-def require_suffix(out, suffix: str, *, ignore_case: bool = True) -> Path:
-    """``out`` as a Path; refused unless it ends with ``suffix`` (e.g. ``.png``)."""
+def require_suffix(out, suffix: str) -> Path:
+    """``out`` as the path of a file to write: refused unless it ends with ``suffix`` (e.g. ``.png``, in any case),
+    its folder exists and it is not itself a folder. Checked before any work, so a bad path fails at once."""
     out = Path(out)
-    if (out.suffix.lower() if ignore_case else out.suffix) != suffix:
+    if out.suffix.lower() != suffix.lower():
         raise LodprtError(f"{out}: the output must be a {suffix} file")
+    if not out.parent.is_dir():
+        raise LodprtError(f"{out}: the folder {out.parent} does not exist")
+    refuse_folder(out)
     return out
 
 
+def refuse_folder(path) -> None:
+    """Refuse an output ``path`` that is an existing folder: a file never replaces one, even with --overwrite."""
+    if Path(path).is_dir():
+        raise LodprtError(f"{path}: is a folder; the output must be a file (--overwrite replaces a file, never a "
+                          "folder)")
+
+
 def refuse_existing(path, overwrite: bool) -> None:
-    """Refuse to replace an existing ``path`` without ``--overwrite``."""
+    """Refuse to replace an existing ``path`` without ``--overwrite``, and a folder even with it."""
+    refuse_folder(path)
     if Path(path).exists() and not overwrite:
         raise LodprtError(f"{path}: already exists; pass --overwrite to replace it")
 
 
-def new_output(out, suffix: str, overwrite: bool, *, ignore_case: bool = True) -> Path:
-    """An output file: the right suffix, and not an existing file unless ``overwrite``."""
-    out = require_suffix(out, suffix, ignore_case=ignore_case)
+def new_output(out, suffix: str, overwrite: bool) -> Path:
+    """An output file, checked before any work: the right suffix (in any case: ``.NPY`` is a ``.npy``), an existing
+    folder, not a folder itself, and not an existing file unless ``overwrite``."""
+    out = require_suffix(out, suffix)
     refuse_existing(out, overwrite)
     return out

@@ -41,19 +41,37 @@ def register(sub) -> None:
 
 
 def cmd_compress(args) -> int:
+    from lodprt.store.bake_store import open_store
     from lodprt.store.codecs import parse_codec
     from lodprt.store.compress import compress_store
 
     codec = parse_codec(args.codec, "--codec")
+    src = open_store(args.input)
+    was = payload_per_sample(src)  # before OUT, which may be IN with --overwrite, replaces it
     with ProgressBars() as bars:
-        res = compress_store(args.input, args.out, codec, overwrite=args.overwrite,
+        res = compress_store(src, args.out, codec, overwrite=args.overwrite,
                              progress=bars.callback("compress", "sample"))
     samples = res["samples"]
-    n = max(len(samples), 1)
-    enc = (sum(s["bytes"] for s in samples) + res["codec_bytes"]) / n
-    raw = sum(s["bytes_raw"] for s in samples) / n
+    enc = (sum(s["bytes"] for s in samples) + res["codec_bytes"]) / max(len(samples), 1)
     worst = max((s["max_abs_error"] for s in samples), default=0.0)
-    print(f"wrote {res['path']}: codec {res['codec']}, {enc / 1024:,.1f} KiB per sample (was {raw / 1024:,.1f} KiB, "
-          f"{raw / max(enc, 1):.1f}x smaller; store-level codec arrays included), largest coefficient error "
+    print(f"wrote {res['path']}: codec {res['codec']}, {enc / 1024:,.1f} KiB per sample (was {was / 1024:,.1f} KiB, "
+          f"{size_change(was, enc)}; store-level codec arrays included), largest coefficient error "
           f"{worst:.3g}, {res['seconds']:.1f} s", file=sys.stderr)
     return 0
+
+
+def payload_per_sample(store) -> float:
+    """Bytes per light sample ``store`` holds as it is stored (its codec's, store-level codec arrays included; the
+    float32 payload of a version-1 store), as ``lodprt info`` prints them."""
+    n = store.num_samples
+    stored = sum(int(store.sample_info(k)["bytes"]) for k in range(n)) + int(store.attrs.get("codec_bytes", 0))
+    return stored / max(n, 1)
+
+
+def size_change(was: float, now: float) -> str:
+    """'2.8x smaller', '1.9x larger', or 'the same size' for a ratio under 1.05 either way."""
+    if now < was and was / max(now, 1) >= 1.05:
+        return f"{was / max(now, 1):.1f}x smaller"
+    if now > was and now / max(was, 1) >= 1.05:
+        return f"{now / max(was, 1):.1f}x larger"
+    return "the same size"

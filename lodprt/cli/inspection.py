@@ -82,7 +82,7 @@ def cmd_radiance(args) -> int:
 
     from lodprt.store.bake_store import open_store
 
-    out = cli_args.new_output(args.out, ".npy", args.overwrite, ignore_case=False)
+    out = cli_args.new_output(args.out, ".npy", args.overwrite)  # before the store is read
     store = open_store(args.store)
     if args.sample is not None:
         if args.color:
@@ -94,6 +94,7 @@ def cmd_radiance(args) -> int:
 
         rad = light_radiance(store, args.light, args.eye, colors=args.color, outside=args.outside,
                              interpolation=args.interpolation)
-    np.save(out, rad)
+    with open(out, "wb") as f:  # np.save(path) would add .npy to a name ending in .NPY
+        np.save(f, rad)
     print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
     return 0
