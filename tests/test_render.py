@@ -56,6 +56,8 @@ def test_bad_camera_is_a_clear_error():
     flat = np.array([[-0.5, 0, -0.5], [0.5, 0, -0.5], [0.5, 0, 0.5], [-0.5, 0, 0.5]])
     img = render(flat, f, np.ones((4, 3)), eye=(0, 3, 0), target=(0, 0, 0), up=(0, 1, 0), size=(64, 64))
     assert img[32, 32].min() == 255 and img[0, 0].max() == 0
+    with pytest.raises(LodprtError, match="camera up: .* has no direction"):  # was replaced by another axis
+        Camera(eye=(0, 1, 2), target=(0, 0, 0), up=(0, 0, 0))
 
 
 def test_tone_map_srgb():

@@ -42,6 +42,8 @@ class Camera:
             if v.shape != (3,) or not np.isfinite(v).all():
                 raise LodprtError(f"camera {name}: expected 3 finite numbers, got {getattr(self, name)!r}")
             object.__setattr__(self, name, tuple(float(x) for x in v))
+        if not np.linalg.norm(self.up) > 0:  # no direction: refused, not replaced as a parallel one is (view_up)
+            raise LodprtError(f"camera up: {list(self.up)} has no direction; give a non-zero vector (default 0 1 0)")
         if not 0.0 < float(self.fov) < 180.0:
             raise LodprtError(f"camera fov: {self.fov} degrees; must lie strictly between 0 and 180")
         if int(self.width) < 1 or int(self.height) < 1:
