@@ -2,6 +2,8 @@
 identity where O is not seen, a sphere's shadow on a plane against the plane's own shadowed transfer bake, the
 reflected light's bounds, the store and the CLI."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -170,6 +172,11 @@ def test_cli_bake_neighbourhood_and_render_receiver(tmp_path, gl, capsys):
                  "--rays", "32", "--environment", "sky:16", "-o", str(out), "--device", "cpu"]) == 0
     store = N.open_neighbourhood(out)
     assert store.matrices().shape == (6, 6, 6, 3, 9, 9) and store.attrs["object"] == "ball"
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0  # info summarises it (it used to say: not a lodprt store)
+    info = json.loads(capsys.readouterr().out)
+    assert info["kind"] == "lodprt neighbourhood store" and info["attrs"]["object"] == "ball"
+    assert [6, 6, 6, 3, 9, 9] in [a["shape"] for a in info["arrays"].values()]
     png = tmp_path / "n.png"
     assert main(["render-environment", str(out), "--receiver", str(tmp_path / "plane.obj"), "--at", "0", "0.05", "0",
                  "--eye", "0", "1.5", "2", "--size", "64", "48", "-o", str(png)]) == 0

@@ -1,6 +1,8 @@
 """Distant-light transfer kernels (unshadowed, shadowed, interreflected, glossy) against closed forms and Embree,
 the transfer store, and run-time relighting under a rotating environment."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -352,6 +354,11 @@ def test_cli_short_forms_bake_and_render_with_environment(tmp_path, capsys, gl):
     assert main(["bake", str(mesh), "--environment", "sky:16", "--sh-order", "2", "-o", str(out)]) == 0
     store = open_transfer(out)
     assert store.order == 2
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0  # info summarises it (it used to refuse it)
+    info = json.loads(capsys.readouterr().out)
+    assert info["kind"] == "lodprt transfer store" and info["attrs"]["sh_order"] == 2
+    assert info["arrays"]["transfer/diffuse"]["shape"] == list(store.read("transfer/diffuse").shape)
     png = tmp_path / "relit.png"
     code = main(["render", str(out), "--environment", "stored", "--rotate", "30", "--eye", "0", "1", "4",
                  "--size", "48", "32", "-o", str(png)])

@@ -193,6 +193,10 @@ def test_cli_bake_and_render_volume(tmp_path, gl, capsys):
     out = tmp_path / "c.zarr"
     assert main(["bake-volume", "cloud:8", "-o", str(out), "--rays", "8", "--bounces", "1", "--environment", "sky:16",
                  "--device", "cpu"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 0  # info summarises it (it used to say: not a lodprt store)
+    text = capsys.readouterr().out
+    assert "lodprt volume store" in text and "bounces: 1" in text and "volume/density: 8 x 4 x 8 float32" in text, text
     png = tmp_path / "c.png"
     assert main(["render-volume", str(out), "--eye", "0", "0.8", "2.6", "--size", "64", "48", "-o", str(png)]) == 0
     import matplotlib.image

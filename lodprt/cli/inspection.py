@@ -15,7 +15,7 @@ def register(sub) -> None:
 
 
 def _add_info(sub) -> None:
-    i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds: mesh, SH order, hierarchy, the light box (the sampled region of --light), bake time, bytes and the light samples.")
+    i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds: mesh, SH order, hierarchy, the light box (the sampled region of --light), bake time, bytes and the light samples; of a transfer, volume or neighbourhood store, its settings and arrays.")
     cli_args.add_store(i)
     cli_args.add_json(i, "a JSON object (vertices, sh_order, bake_seconds, light_box, samples, ...)")
     i.set_defaults(handler=cmd_info)
@@ -46,6 +46,9 @@ def _add_radiance(sub) -> None:
 def cmd_info(args) -> int:
     from lodprt.store.bake_store import open_store
 
+    other = other_store(args.store)
+    if other is not None:  # a transfer, volume or neighbourhood store: what it holds, as it is stored
+        return print_summary(other.summary(), args.json)
     info = open_store(args.store).info()
     if args.json:
         print(json.dumps(info, indent=2))
@@ -97,4 +100,32 @@ def cmd_radiance(args) -> int:
     with open(out, "wb") as f:  # np.save(path) would add .npy to a name ending in .NPY
         np.save(f, rad)
     print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
+    return 0
+
+
+def other_store(path):
+    """The store at ``path`` opened as a transfer, volume or neighbourhood store when it is one (else None: a bake
+    store, or not a store, which ``open_store`` says)."""
+    from lodprt.store.neighbourhood_store import NeighbourhoodStore, is_neighbourhood_store
+    from lodprt.store.transfer_store import TransferStore, is_transfer_store
+    from lodprt.store.volume_store import VolumeStore, is_volume_store
+
+    for test, kind in ((is_transfer_store, TransferStore), (is_volume_store, VolumeStore),
+                       (is_neighbourhood_store, NeighbourhoodStore)):
+        if test(path):
+            return kind(path)
+    return None
+
+
+def print_summary(summary: dict, as_json: bool) -> int:
+    """``lodprt info`` of a transfer, volume or neighbourhood store (``FormatStore.summary``)."""
+    if as_json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    print(f"{summary['store']}: {summary['kind']} v{summary['format_version']} (baked by {summary['baked_by']}; "
+          f"{summary['bytes_on_disk'] / 1024:,.0f} KiB on disk)")
+    for k, v in summary["attrs"].items():
+        print(f"  {k}: {json.dumps(v) if isinstance(v, (dict, list)) else v}")
+    for name, a in summary["arrays"].items():
+        print(f"  {name}: {' x '.join(map(str, a['shape'])) or 'scalar'} {a['dtype']}")
     return 0

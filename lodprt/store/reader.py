@@ -78,3 +78,28 @@ class FormatStore:
     def order(self) -> int:
         """SH bands of the lighting the store's transfer takes."""
         return int(self.attrs["sh_order"])
+
+    def summary(self) -> dict:
+        """What ``lodprt info`` prints of a store of this kind: its kind, format version, the command that bakes
+        one, its root attributes (JSON values only; long lists shortened) and every array's shape and dtype, with
+        the bytes on disk."""
+        def plain(v):
+            if isinstance(v, (list, tuple)) and len(v) > 12:
+                return f"{len(v)} values"
+            return v if isinstance(v, (str, int, float, bool, list, tuple, dict)) or v is None else str(v)
+
+        arrays = {}
+
+        def walk(group, prefix: str) -> None:
+            for name, member in sorted(group.members()):
+                if hasattr(member, "shape"):
+                    arrays[prefix + name] = {"shape": list(member.shape), "dtype": str(member.dtype)}
+                else:
+                    walk(member, f"{prefix}{name}/")
+
+        walk(self.root, "")
+        on_disk = sum(p.stat().st_size for p in self.path.rglob("*") if p.is_file())
+        return {"store": str(self.path), "kind": self.WHAT, "format": self.FORMAT,
+                "format_version": self.attrs.get("format_version"), "baked_by": self.BAKE,
+                "attrs": {k: plain(v) for k, v in sorted(self.attrs.items()) if k not in ("format", "format_version")},
+                "arrays": arrays, "bytes_on_disk": on_disk}
