@@ -111,6 +111,17 @@ def test_mip_levels_keep_power_and_report_growing_error(kind):
     assert errs[2] < 4e-3  # level 2: the paper's 64 x 64 of 256 x 256 is the same ratio (measured 0.30% / 0.09%)
 
 
+def test_mip_past_the_last_level_names_the_level_once():
+    """A mip level past 1 x 1 is one message naming the map, the level and how far it halves (it repeated
+    "(mip)" once per level done)."""
+    env = E.procedural("sky", resolution=16)
+    assert env.mip(4).resolution == 1
+    with pytest.raises(LodprtError, match=r"\(latlong 16\): mip level 9: resolution 16 halves only 4 time\(s\), "
+                                          r"to 1$") as err:
+        env.mip(9)
+    assert "(mip)" not in str(err.value)
+
+
 def test_hdr_round_trip(tmp_path):
     """A lat-long map written as Radiance .hdr reads back within the 8-bit mantissa precision (0.8%)."""
     env = E.procedural("sky", resolution=16)

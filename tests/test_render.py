@@ -434,6 +434,10 @@ def test_cli_turntable_bad_fps_touches_nothing(cut_store, tmp_path, capsys, monk
         assert len(err.splitlines()) == 1 and err.startswith("lodprt turntable: error: --fps "), err
     assert gif.read_bytes() == good
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.gif"]  # no new file, no partial file
+    assert main(["turntable", str(cut_store), *SMALL, "--frames", "2", "--light-turns", "nan", "-o", str(gif),
+                 "--overwrite"]) == 2  # named, not the lights' nan positions
+    assert capsys.readouterr().err.strip().endswith("--light-turns nan: must be a finite number of turns")
+    assert gif.read_bytes() == good
 
     def broken_writer(path, *args, **kw):  # writes part of a file, then fails as Pillow did on a bad duration
         Path(path).write_bytes(b"GIF89a")

@@ -176,6 +176,12 @@ def test_load_volume_files_and_errors(tmp_path):
     np.save(tmp_path / "neg.npy", -grid)
     with pytest.raises(LodprtError, match="neg.npy.*negative"):
         load_volume(tmp_path / "neg.npy", bounds=(0, 0, 0, 1, 1, 1))
+    holes = grid.astype(np.float32)
+    holes[0, 1, 2] = np.nan
+    np.save(tmp_path / "nan.npy", holes)
+    with pytest.raises(LodprtError, match=r"nan.npy: density has 1 negative or non-finite voxel\(s\), the first at "
+                                          r"\(0, 1, 2\) \(nan\)$"):  # the value as a number, not np.float32(nan)
+        load_volume(tmp_path / "nan.npy", bounds=(0, 0, 0, 1, 1, 1))
     np.save(tmp_path / "flat.npy", grid[0])
     with pytest.raises(LodprtError, match="3-D grid"):
         load_volume(tmp_path / "flat.npy", bounds=(0, 0, 0, 1, 1, 1))

@@ -221,6 +221,8 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
     and how many such stale frames were removed."""
     out = Path(out)
     check_fps(fps, out.suffix)  # every output kind, before any file is touched or frame drawn
+    if not np.isfinite(light_turns):  # named here: a nan turn reached the lights' check as nan positions
+        raise LodprtError(f"--light-turns {light_turns}: must be a finite number of turns")
     if frames < 1:
         raise LodprtError(f"--frames {frames}: must be >= 1")
     gif, video, exr = out.suffix.lower() == ".gif", None, None

@@ -82,7 +82,10 @@ class Environment:
         """The map downsampled ``level`` times by the solid-angle-weighted 2 x 2 box filter (I-3.2): the four
         children of a texel cover exactly its solid angle, so total power and the constant coefficient are kept."""
         env = self
-        for _ in range(int(level)):
+        for done in range(int(level)):
+            if env.resolution < 2 or env.resolution % 2:  # named once, with how far it got (not "(mip)" per level)
+                raise EnvironmentMapError(f"{self.source}: mip level {level}: resolution {self.resolution} halves "
+                                          f"only {done} time(s), to {env.resolution}")
             env = env._half()
         return env
 

@@ -111,7 +111,7 @@ def check_density(density, where: str) -> np.ndarray:
     if bad.any():
         first = tuple(int(i) for i in np.argwhere(bad)[0])
         raise VolumeError(f"{where}: density has {int(bad.sum())} negative or non-finite voxel(s), the first at "
-                          f"{first} ({d[first]!r})")
+                          f"{first} ({float(d[first])})")
     return d
 
 
