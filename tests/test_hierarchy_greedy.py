@@ -280,7 +280,9 @@ def test_the_default_build_reports_progress_in_the_calling_thread(monkeypatch, w
                         progress=lambda done, total: calls.append((done, total, threading.get_ident())))
     assert h.method == "sequential"
     done = [c[0] for c in calls]
-    assert len(calls) > (4 if workers == 1 else 1)  # after each unit on one thread; at least once per phase
+    # after each unit on one thread; with two, after each unit the calling thread ran and at the end: on this
+    # small build under load the other thread can run every unit (CI once saw one call), so only the end is sure
+    assert len(calls) > (4 if workers == 1 else 0)
     assert {c[1] for c in calls} == {len(pos)}  # every vertex of the open grids may move
     assert done == sorted(done) and done[-1] == h.num_nodes - len(pos) <= len(pos)
     assert {c[2] for c in calls} == {threading.get_ident()}

@@ -297,7 +297,7 @@ def test_every_command_on_every_kind(kinds, name, tmp_path, capsys, gl):
 
 def test_transfer_store_through_point_light_commands(tmp_path, capsys):
     """A transfer store (bake --environment) given to the point-light commands is a one-line error (exit 2), never
-    a traceback."""
+    a traceback; ``info`` summarises it."""
     import trimesh
 
     mesh = tmp_path / "ball.obj"
@@ -305,7 +305,8 @@ def test_transfer_store_through_point_light_commands(tmp_path, capsys):
     out = tmp_path / "ball.zarr"
     assert cli("bake", mesh, "--environment", "sky:16", "--sh-order", 2, "-o", out) == 0
     capsys.readouterr()
-    for argv in (["info", out], ["radiance", out, "--sample", 0, "--eye", 0, 1, 3, "-o", tmp_path / "r.npy"],
+    assert cli("info", out) == 0 and "lodprt transfer store" in capsys.readouterr().out  # info summarises any kind
+    for argv in (["radiance", out, "--sample", 0, "--eye", 0, 1, 3, "-o", tmp_path / "r.npy"],
                  ["frames", out, "--frames", 2], ["render", out, *VIEW, "-o", tmp_path / "f.png"],
                  ["compare", out, *VIEW, "-o", tmp_path / "c.png"],
                  ["diff", out, "--sample", 0, "--eye", 0, 1, 3, "-o", tmp_path / "d.png"]):
