@@ -155,12 +155,14 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
     (a kind none of whose jobs has finished: the slowest rate known; ties: the first in ``jobs``), so that a costly
     kind's last jobs do not start last and keep one thread busy alone, and the work behind a long chain starts
     early; but first, the largest job of each kind of several jobs none of which has run yet, so that its rate is
-    measured before the rest of that kind is placed. ``after()`` runs in the calling thread after each of its jobs
-    and at the end; the first error stops the rest and is raised here. The jobs must not depend on the order they
-    run in."""
+    measured before the rest of that kind is placed. ``after()`` runs in the calling thread after each of its jobs,
+    before it takes or waits for the next when another thread has finished one since (a progress bar moves while
+    the caller waits), and at the end; the first error stops the rest and is raised here. The jobs must not depend on the
+    order they run in."""
     lock = threading.Condition()
     waits = [j.waits for j in jobs]
     left, failed, rate, running = len(jobs), [], {}, [0]
+    finished = [0]  # jobs finished so far, by any thread (the caller reports those it has not seen)
     jobs_of = collections.Counter(j.kind for j in jobs)
     busy = collections.Counter()  # kind -> its jobs running
     # ready jobs, longest first (ties: the first in ``jobs``): one heap per kind of several jobs (their rates differ),
@@ -203,10 +205,10 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
 
     def work(caller=False):
         nonlocal left
-        cache = {}
+        cache, seen = {}, 0
         while True:
             with lock:
-                while not count[0] and left and not failed:
+                while not count[0] and left and not failed and not (caller and finished[0] != seen):
                     if not running[0]:  # nothing runs that could release a job: a cycle of waits
                         failed.append(RuntimeError("run_jobs: the jobs left wait for each other"))
                         lock.notify_all()
@@ -214,8 +216,14 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
                     lock.wait()
                 if not left or failed:
                     return
-                k = take()
-                running[0] += 1
+                if caller and finished[0] != seen:  # another thread's finished job: reported before the next
+                    k, seen = None, finished[0]
+                else:
+                    k = take()
+                    running[0] += 1
+            if k is None:
+                after()
+                continue
             t = time.perf_counter()
             try:
                 jobs[k].run(cache)
@@ -238,6 +246,9 @@ def run_jobs(jobs: list[Job], workers: int, after: Callable[[], None] = lambda: 
                     slow[1] = max(rate, key=rate_of)
                     slow[0] = rate_of(slow[1])
                 left -= 1
+                finished[0] += 1
+                if caller:
+                    seen = finished[0]
                 for d in jobs[k].then:
                     waits[d] -= 1
                     if waits[d] == 0:

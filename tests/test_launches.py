@@ -93,3 +93,28 @@ def test_no_jobs_is_no_work():
     calls = []
     run_jobs([], 3, lambda: calls.append(1))
     assert calls == [1]
+
+
+def test_the_caller_reports_another_threads_finished_job_while_it_waits():
+    """A progress bar moves while the calling thread waits: the first two jobs meet at a barrier (so each thread
+    runs one), the third waits for both. The caller's returns at once, the other thread's 0.2 s later; the caller,
+    with nothing ready meanwhile, reports that job (2 done) before the third runs (it used to report only after
+    its own next job, or at the end)."""
+    done, reports, lock = [], [], threading.Lock()
+    meet = threading.Barrier(2)
+    main = threading.main_thread()
+
+    def job(cache):
+        if len(cache) == 0 and len(done) < 2:
+            cache["met"] = True
+            meet.wait(timeout=10)
+        if threading.current_thread() is not main:
+            time.sleep(0.2)
+        with lock:
+            done.append(threading.current_thread() is main)
+
+    jobs = [Job(job, size=1, then=[2]), Job(job, size=1, then=[2]), Job(job, size=1, waits=2)]
+    run_jobs(jobs, 2, lambda: reports.append(len(done)))
+    assert sorted(done[:2]) == [False, True] and len(done) == 3
+    assert reports[0] == 1  # after the caller's own job
+    assert 2 in reports and reports[-1] == 3  # the other thread's job, while the caller waited; then the end

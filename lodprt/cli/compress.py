@@ -41,13 +41,14 @@ def register(sub) -> None:
 
 
 def cmd_compress(args) -> int:
+    from lodprt.cli.inspection import payload_per_sample
     from lodprt.store.bake_store import open_store
     from lodprt.store.codecs import parse_codec
     from lodprt.store.compress import compress_store
 
     codec = parse_codec(args.codec, "--codec")
     src = open_store(args.input)
-    was = payload_per_sample(src)  # before OUT, which may be IN with --overwrite, replaces it
+    was = payload_per_sample(src.info())  # before OUT, which may be IN with --overwrite, replaces it
     with ProgressBars() as bars:
         res = compress_store(src, args.out, codec, overwrite=args.overwrite,
                              progress=bars.callback("compress", "sample"))
@@ -58,14 +59,6 @@ def cmd_compress(args) -> int:
           f"{size_change(was, enc)}; store-level codec arrays included), largest coefficient error "
           f"{worst:.3g}, {res['seconds']:.1f} s", file=sys.stderr)
     return 0
-
-
-def payload_per_sample(store) -> float:
-    """Bytes per light sample ``store`` holds as it is stored (its codec's, store-level codec arrays included; the
-    float32 payload of a version-1 store), as ``lodprt info`` prints them."""
-    n = store.num_samples
-    stored = sum(int(store.sample_info(k)["bytes"]) for k in range(n)) + int(store.attrs.get("codec_bytes", 0))
-    return stored / max(n, 1)
 
 
 def size_change(was: float, now: float) -> str:

@@ -69,8 +69,7 @@ def cmd_info(args) -> int:
     print(f"  bake {info['bake_seconds']:.2f} s on {info['device']}; {info['bytes_total'] / 1024:,.0f} KiB payload, "
           f"{info['bytes_on_disk'] / 1024:,.0f} KiB on disk")
     n = max(len(info["samples"]), 1)
-    per = (info["bytes_total"] + info["codec_bytes"]) / n
-    print(f"  codec {info['codec']}: {per / 1024:,.1f} KiB per sample payload"
+    print(f"  codec {info['codec']}: {payload_per_sample(info) / 1024:,.1f} KiB per sample payload"
           + ("" if info["codec"] == "none" else f" (store-level codec arrays included; float32: "
              f"{info['bytes_raw_total'] / n / 1024:,.1f} KiB)"))
     print(f"  {'sample':>6} {'position':>30} {'kept':>9} {'lit':>9} {'shadowed':>9} {'KiB':>9}")
@@ -101,6 +100,12 @@ def cmd_radiance(args) -> int:
         np.save(f, rad)
     print(f"wrote {out}: {rad.shape} float32, mean {rad.mean():.4g}, max {rad.max():.4g}")
     return 0
+
+
+def payload_per_sample(info: dict) -> float:
+    """Bytes per light sample a store holds as it is stored (its codec's, the store-level codec arrays included),
+    from ``Store.info()``: what ``info`` prints and ``compress`` compares with."""
+    return (info["bytes_total"] + info["codec_bytes"]) / max(len(info["samples"]), 1)
 
 
 def other_store(path):

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import LodprtError, StoreError
-from lodprt.store.reader import read_array
+from lodprt.store.reader import folder_bytes, read_array
 from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_format
 
 log = logging.getLogger(__name__)
@@ -297,7 +297,7 @@ class Store:
             out["hierarchy_nodes"] = out["hierarchy_roots"] = out["hierarchy_depth"] = out["hierarchy_seconds"] = None
             out["hierarchy_method"] = None
         out["bytes_total"] = int(sum(s["bytes"] for s in samples))
-        out["bytes_on_disk"] = int(sum(f.stat().st_size for f in self.path.rglob("*") if f.is_file()))
+        out["bytes_on_disk"] = folder_bytes(self.path)
         from lodprt.store.codecs import codec_summary  # version 2: codec, store-level bytes, version-1 payload
 
         return {**out, **codec_summary(self)}

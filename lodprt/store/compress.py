@@ -20,6 +20,7 @@ import numpy as np
 
 from lodprt.store import codecs
 from lodprt.store.bake_store import FORMAT_VERSION, Store, open_store, sample_group
+from lodprt.store.reader import folder_bytes
 from lodprt.store.white import RECORD_KEYS, WHITE, record_white
 from lodprt.store.writer import StoreWriter
 
@@ -138,9 +139,6 @@ def write_sample(writer: StoreWriter, src: Store, k: int, codec: codecs.Codec, i
 def on_disk_bytes(path: str | os.PathLike) -> dict:
     """Bytes on disk of a store: {"total", "samples": per sample folder, "codec": the codec/ folder}."""
     root = Path(path)
-
-    def size(folder: Path) -> int:
-        return int(sum(f.stat().st_size for f in folder.rglob("*") if f.is_file())) if folder.exists() else 0
-
     samples = sorted((root / "samples").glob("[0-9]*")) if (root / "samples").exists() else []
-    return {"total": size(root), "samples": [size(f) for f in samples], "codec": size(root / "codec")}
+    return {"total": folder_bytes(root), "samples": [folder_bytes(f) for f in samples],
+            "codec": folder_bytes(root / "codec")}

@@ -36,6 +36,12 @@ def read_array(root, path: Path, name: str, *, all_chunks: bool) -> np.ndarray:
     return value
 
 
+def folder_bytes(folder) -> int:
+    """Bytes of the files under ``folder`` (0 when it does not exist): a store's size on disk."""
+    folder = Path(folder)
+    return int(sum(f.stat().st_size for f in folder.rglob("*") if f.is_file())) if folder.exists() else 0
+
+
 class FormatStore:
     """Read access to a store of ``FORMAT`` written by a lodprt that writes one of ``VERSIONS``; subclasses set
     ``FORMAT``, ``VERSIONS``, ``WHAT`` (what messages call it) and ``BAKE`` (the command that bakes one)."""
@@ -98,8 +104,7 @@ class FormatStore:
                     walk(member, f"{prefix}{name}/")
 
         walk(self.root, "")
-        on_disk = sum(p.stat().st_size for p in self.path.rglob("*") if p.is_file())
         return {"store": str(self.path), "kind": self.WHAT, "format": self.FORMAT,
                 "format_version": self.attrs.get("format_version"), "baked_by": self.BAKE,
                 "attrs": {k: plain(v) for k, v in sorted(self.attrs.items()) if k not in ("format", "format_version")},
-                "arrays": arrays, "bytes_on_disk": on_disk}
+                "arrays": arrays, "bytes_on_disk": folder_bytes(self.path)}
