@@ -329,7 +329,8 @@ def test_zero_area_mesh_refused_naming_file_and_object(tmp_path):
     toml = write(tmp_path, "s.toml", '[[object]]\nmesh = "flat.obj"\nname = "x"\n')
     with pytest.raises(SceneError) as info:
         load_scene(toml)
-    assert str(info.value) == f"{toml}: object[0] (name 'x'): every face of flat.obj has zero area; nothing to bake"
+    assert str(info.value).startswith(f"{toml}: object[0] (name 'x'): every face of flat.obj has zero area after "
+                                      "placement; nothing to bake")
     with pytest.raises(SceneError, match=r"flat\.obj: every face of the mesh has zero area"):
         load_scene(tmp_path / "flat.obj")
 
@@ -413,3 +414,83 @@ def test_huge_light_grid_refused_before_meshes_are_read(tmp_path):
     with pytest.raises(SceneError, match=r"s\.toml: lights\.grid: .* asks for 1000000000000000 light samples; at "
                                          r"most 100,000 are allowed"):
         load_scene(toml)
+
+
+MATERIALS_UV_OBJ = """\
+v 0 0 0
+v 1 0 0
+v 0 0 1
+v 1 0 1
+vt 0 0
+vt 1 0
+vt 0 1
+vt 1 1
+vt 0.5 0.5
+vn 0 1 0
+usemtl a
+f 1/1/1 3/3/1 2/2/1
+usemtl b
+f 2/5/1 3/3/1 4/4/1
+"""
+
+
+def test_obj_with_materials_and_texture_coordinates_keeps_the_files_vertices(tmp_path):
+    """An OBJ with two usemtl groups whose faces carry vt/vn: trimesh gives each group its own vertex copies (7 of
+    the file's 4); the file's vertices come back, in order, and the two faces share their edge (1-2)."""
+    path = write(tmp_path, "uv.obj", MATERIALS_UV_OBJ)
+    pos, faces = load_mesh(path)
+    ref = np.array([[float(t) for t in ln.split()[1:4]] for ln in MATERIALS_UV_OBJ.splitlines() if ln.startswith("v ")])
+    np.testing.assert_array_equal(pos, ref)
+    np.testing.assert_array_equal(faces, [[0, 2, 1], [1, 2, 3]])
+
+
+def test_unreferenced_vertices_size_nothing(tmp_path):
+    """A vertex no face uses, 100 units under a unit triangle, moves neither the floor nor the default light box
+    nor the default radius: the scene is the one without it."""
+    tri = "v 0 0 0\nv 1 0 0\nv 0 0 1\n"
+    write(tmp_path, "a.obj", tri + "f 1 3 2\n")
+    write(tmp_path, "b.obj", tri + "v 0 -100 0\nf 1 3 2\n")
+    scenes = [load_scene(write(tmp_path, f"{m}.toml", f'[[object]]\nmesh = "{m}.obj"\n[floor]\nresolution = 3\n'))
+              for m in "ab"]
+    assert scenes[0].lights == scenes[1].lights
+    np.testing.assert_array_equal(scenes[0].positions[-9:], scenes[1].positions[-9:])  # the floor, at y = 0
+    assert scenes[1].positions[-9:, 1].max() == 0.0
+
+
+def test_assemble_scene_checks_arrays_given_in_memory():
+    """Arrays handed to assemble_scene get the checks a file gets: a negative or too large face index, NaN and
+    (V, 2) positions, float faces are refused naming the object and the field."""
+    from lodprt.model.scene import THESIS_MATERIAL, assemble_scene
+
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1.0]])
+    f = np.array([[0, 2, 1], [1, 2, 3]])
+    cases = [(p, np.array([[0, 2, 1], [1, 2, -1]]), r"faces: indices must lie in 0\.\.3, got -1\.\.2"),
+             (p, np.array([[0, 2, 1], [1, 2, 7]]), r"faces: indices must lie in 0\.\.3, got 0\.\.7"),
+             (np.where(np.arange(12).reshape(4, 3) == 4, np.nan, p), f, r"positions: vertex 1 is \[1\.0, nan"),
+             (p[:, :2], f, r"positions: expected \(V, 3\)"), (p, f.astype(float), r"faces: expected \(F, 3\) integer")]
+    for pos, faces, msg in cases:
+        with pytest.raises(SceneError, match=r"src: object\[0\] \(name 'o'\): " + msg):
+            assemble_scene([("o", pos, faces, THESIS_MATERIAL)], None, {}, "lights", "src")
+    assemble_scene([("o", p, f, THESIS_MATERIAL)], None, {}, "lights", "src")  # the good one passes
+
+
+def test_radiance_beyond_float32_refused(tmp_path):
+    """Each limit alone holds (intensity 1e12, kd = ks = 1e6, radius 1e-12) but their product, 2e42, would overflow
+    float32: refused naming the three fields. A radius of 1e-9 brings it to 2e36 (still refused), 1e-8 to 2e34."""
+    write(tmp_path, "t.obj", "v 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 3 2\n")
+    body = '[[object]]\nmesh = "t.obj"\nkd = 1e6\nks = 1e6\n[lights]\nintensity = 1e12\nradius = {}\n'
+    for r in ("1e-12", "1e-9"):
+        with pytest.raises(SceneError, match=r"lights\.intensity 1e\+12 x \(kd \+ ks\) 2e\+06 / lights\.radius\^2"):
+            load_scene(write(tmp_path, "s.toml", body.format(r)))
+    assert load_scene(write(tmp_path, "s.toml", body.format("1e-8"))).lights.radius == 1e-8
+
+
+def test_one_number_is_grey_for_colours_only(tmp_path):
+    """kd = 0.5 and intensity = 2 stand for three equal values; rotate = 90 or translate = 5 is refused (it used to
+    become [90, 90, 90] or [5, 5, 5] without a word)."""
+    write(tmp_path, "t.obj", "v 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 3 2\n")
+    scene = load_scene(write(tmp_path, "g.toml", '[[object]]\nmesh = "t.obj"\nkd = 0.5\n[lights]\nintensity = 2\n'))
+    assert scene.materials[0].kd == (0.5, 0.5, 0.5) and scene.lights.intensity == (2.0, 2.0, 2.0)
+    for key, value in (("rotate", 90), ("translate", 5)):
+        with pytest.raises(SceneError, match=rf"object\[0\]\.{key}: expected a list of 3 numbers, got {value}"):
+            load_scene(write(tmp_path, "v.toml", f'[[object]]\nmesh = "t.obj"\n{key} = {value}\n'))

@@ -108,6 +108,59 @@ def test_overwrite_replaces_a_store(small, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.zarr"]
 
 
+def test_a_symlinked_or_nameless_destination_is_refused(small, baked, tmp_path):
+    """OUT a symbolic link to a store is refused, even with overwrite (replacing it emptied the store it pointed
+    to); '.' and '..' are refused with a message (they raised from pathlib). The linked store is untouched, and a
+    parked link is removed as a link, never what it points to."""
+    from lodprt.store.writer import StoreWriter, clean_leftovers
+
+    path, _ = baked
+    before = sorted(p.relative_to(path) for p in path.rglob("*"))
+    link = tmp_path / "link.zarr"
+    link.symlink_to(path)
+    with pytest.raises(StoreError, match=r"link\.zarr: is a symbolic link \(to .*b\.zarr\); name the store's own"):
+        bake(small, link, sh_order=2, device="cpu", overwrite=True, hierarchy=False)
+    assert link.is_symlink() and sorted(p.relative_to(path) for p in path.rglob("*")) == before
+    for name in (".", ".."):
+        with pytest.raises(StoreError, match=rf"name the store's folder \(e\.g\. out\.zarr\), not '\{name}'"):
+            StoreWriter(name, overwrite=True)
+    parked = tmp_path / "x.zarr.replaced-999999"  # a parked link (an older lodprt could leave one)
+    parked.symlink_to(path)
+    clean_leftovers(tmp_path / "x.zarr")
+    assert sorted(p.relative_to(path) for p in path.rglob("*")) == before
+
+
+def test_check_settings_names_the_scene_before_what_it_derives():
+    """Another scene changes settings derived from it (ray_offset) too: the message names the scene's fingerprint,
+    whatever the settings' order, not a setting the user never gave."""
+    from lodprt.errors import LodprtError
+    from lodprt.store.resume import check_settings
+
+    recorded = {"ray_offset": 1e-4, "fingerprint": {"positions": "a", "faces": "f"}}
+    wanted = {"ray_offset": 3e-4, "fingerprint": {"positions": "b", "faces": "f"}}
+    with pytest.raises(LodprtError, match=r"the scene differs from the one it baked \(fingerprint of positions\)"):
+        check_settings("s.zarr", recorded, wanted)
+
+
+def test_bake_arguments_of_the_wrong_kind_are_refused(small):
+    """jobs 0, -2, 1.5, sh_order '3' and threshold_deg '5' are refused naming the argument (jobs 0 ran with one
+    thread, 1.5 raised from itertools, the strings TypeErrors)."""
+    from lodprt.errors import LodprtError
+
+    for kw, msg in (({"jobs": 0}, "jobs 0"), ({"jobs": -2}, "jobs -2"), ({"jobs": 1.5}, "jobs 1.5"),
+                    ({"sh_order": "3"}, "sh_order '3'"), ({"threshold_deg": "5"}, "threshold_deg '5'")):
+        with pytest.raises(LodprtError, match=msg):
+            bake(small, None, **{"sh_order": 2, "device": "cpu", **kw})
+
+
+def test_cli_names_the_options_it_refuses(tmp_path):
+    """--sh-order 0 and --threshold-deg -1 are named as the options, before the scene is read."""
+    r = lodprt("bake", tmp_path / "none.obj", "-o", tmp_path / "x.zarr", "--sh-order", "0")
+    assert r.returncode == 2 and "--sh-order 0: a whole number from 1" in r.stderr, r.stderr
+    r = lodprt("bake", tmp_path / "none.obj", "-o", tmp_path / "x.zarr", "--threshold-deg", "-1")
+    assert r.returncode == 2 and "--threshold-deg -1.0: the light cut needs" in r.stderr, r.stderr
+
+
 def test_open_errors(tmp_path):
     """Opening a missing path or a folder that is not a store names the path."""
     with pytest.raises(StoreError, match="no such store"):

@@ -109,6 +109,14 @@ def cmd_bake(args) -> int:
     from lodprt.model.hierarchy_build import check_method
 
     check_method(args.hierarchy)  # and so does an unknown hierarchy build
+    from lodprt.precompute.bake import check_hierarchy, check_sh_order, light_cut_threshold
+
+    if args.sh_order is not None:  # and a bad order or threshold, named as the options
+        check_sh_order(args.sh_order, name="--sh-order")
+    full = args.full or args.no_hierarchy
+    check_hierarchy(not args.no_hierarchy, light_cut_threshold(args.threshold_deg, full=full,
+                                                                 hierarchy=not args.no_hierarchy),
+                    args.hierarchy, name="--threshold-deg")
     device = resolve_device(args.device)  # refuse an unavailable device before loading anything
     scene = load_scene(args.scene)
     n = scene.lights.positions.shape[0]

@@ -29,6 +29,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -96,6 +97,9 @@ def load_mesh(
     if len(faces) == 0:
         verts, faces = _fallback(path, verts, points, data)
         reader = "pymeshlab (trimesh found no faces)"
+    elif suffix_of(path) == ".obj" and len(verts) != (n := obj_vertex_count(path, data)):
+        verts, faces = _obj_by_pymeshlab(path, data, len(verts), n)
+        reader = f"pymeshlab (trimesh made {len(verts)} vertices of the file's {n})"
     log.info("%s: read with %s: %d vertices, %d triangles", path, reader, len(verts), len(faces))
     _check_coordinates(path, verts, np.inf, "in the file")
     if faces.min() < 0 or faces.max() >= len(verts):
@@ -157,12 +161,14 @@ def _read_trimesh(path: Path, data: bytes | None) -> tuple[np.ndarray, np.ndarra
     import trimesh
 
     try:
-        if data is None:
-            loaded = trimesh.load_scene(str(path), process=False, maintain_order=True)
-        else:
-            loaded = trimesh.load_scene(io.BytesIO(data), file_type=Path(path.stem).suffix[1:].lower(),
-                                        process=False, maintain_order=True)
-        mesh = loaded.to_mesh()
+        with warnings.catch_warnings():  # e.g. 'All-NaN slice' from trimesh's texture code on usemtl groups
+            warnings.simplefilter("ignore", RuntimeWarning)
+            if data is None:
+                loaded = trimesh.load_scene(str(path), process=False, maintain_order=True)
+            else:
+                loaded = trimesh.load_scene(io.BytesIO(data), file_type=suffix_of(path)[1:], process=False,
+                                            maintain_order=True)
+            mesh = loaded.to_mesh()
     except Exception as exc:  # trimesh raises many types for bad files
         raise SceneError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from exc
     clouds = [g.vertices for g in loaded.geometry.values() if isinstance(g, trimesh.PointCloud)]
@@ -173,6 +179,31 @@ def _read_trimesh(path: Path, data: bytes | None) -> tuple[np.ndarray, np.ndarra
     if len(counts) == 1:
         verts, faces = _fold_material_copies(path, verts, faces, counts.pop())
     return verts, faces, points
+
+
+def suffix_of(path: Path) -> str:
+    """The format suffix of ``path``, lower case: the inner one of a compressed file (``bunny.obj.xz``: ``.obj``)."""
+    suffix = path.suffix.lower()
+    return Path(path.stem).suffix.lower() if suffix in COMPRESSED else suffix
+
+
+def obj_vertex_count(path: Path, data: bytes | None) -> int:
+    """How many ``v`` lines (vertex positions) the OBJ file at ``path`` (or ``data``, its decompressed bytes) has."""
+    import re
+
+    text = path.read_bytes() if data is None else data
+    return len(re.findall(rb"(?m)^[ \t]*v[ \t]", text))
+
+
+def _obj_by_pymeshlab(path: Path, data: bytes | None, made: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """pymeshlab's reading of an OBJ whose vertices trimesh duplicated or reordered (several ``usemtl`` groups with
+    texture coordinates or normals give each group its own copies), checked to keep the file's ``n`` vertices."""
+    log.info("%s: trimesh made %d vertices of the file's %d; reading it with pymeshlab", path, made, n)
+    verts, faces = _read_pymeshlab(path, data)
+    if len(verts) != n:
+        raise SceneError(f"{path}: field 'vertices': the file has {n} vertices, but trimesh made {made} and pymeshlab "
+                         f"{len(verts)}; store vertex i would not be the file's vertex i")
+    return verts, faces
 
 
 def _fold_material_copies(path: Path, verts: np.ndarray, faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

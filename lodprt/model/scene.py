@@ -59,6 +59,10 @@ MIN_SCENE_DIAGONAL = 1e-9
 MATERIAL_LIMIT = 1e6
 #: Largest light intensity (each channel); radiance = coefficients x intensity is returned as float32.
 INTENSITY_LIMIT = 1e12
+#: Largest radiance a scene may reach, intensity x (kd + ks) / radius^2 at a light's own radius: each limit above
+#: holds alone, but their product (1e42) would overflow float32 (3.4e38); two orders of magnitude are left for the
+#: SH basis and the sums over samples.
+RADIANCE_LIMIT = 1e36
 
 
 @dataclasses.dataclass(frozen=True)
@@ -308,8 +312,9 @@ def _number(
     return v
 
 
-def _vector(where: str, value, n: int, **kw) -> tuple[float, ...]:
-    if isinstance(value, (int, float)) and not isinstance(value, bool) and n == 3:
+def _vector(where: str, value, n: int, *, grey: bool = False, **kw) -> tuple[float, ...]:
+    """``value`` as ``n`` numbers; with ``grey`` (a colour: kd, intensity) one number stands for all three."""
+    if grey and isinstance(value, (int, float)) and not isinstance(value, bool) and n == 3:
         value = [value] * 3  # a grey colour given as one number
     if not isinstance(value, (list, tuple)) or len(value) != n:
         raise SceneError(f"{where}: expected a list of {n} numbers, got {_show(value)}")
@@ -318,7 +323,7 @@ def _vector(where: str, value, n: int, **kw) -> tuple[float, ...]:
 
 def _material(where: str, table: dict, default: Material) -> Material:
     lim = {"minimum": 0.0, "maximum": MATERIAL_LIMIT}
-    kd = _vector(f"{where}.kd", table["kd"], 3, **lim) if "kd" in table else default.kd
+    kd = _vector(f"{where}.kd", table["kd"], 3, grey=True, **lim) if "kd" in table else default.kd
     ks = _number(f"{where}.ks", table["ks"], **lim) if "ks" in table else default.ks
     n = _number(f"{where}.shininess", table["shininess"], minimum=0.0) if "shininess" in table else default.shininess
     mirror = table.get("mirror", default.mirror)
@@ -365,7 +370,8 @@ def _lights(where: str, table: dict, bounds: np.ndarray, diagonal: float) -> Lig
                 f"({name}min={box[a]}, {name}max={box[a + 3]}); give xmin ymin zmin xmax ymax zmax with max > min"
             )
     intensity = _vector(
-        f"{where}.intensity", table.get("intensity", [1.0, 1.0, 1.0]), 3, minimum=0.0, maximum=INTENSITY_LIMIT
+        f"{where}.intensity", table.get("intensity", [1.0, 1.0, 1.0]), 3, grey=True, minimum=0.0,
+        maximum=INTENSITY_LIMIT
     )
     falloff = table.get("falloff", "inverse-square")
     if falloff not in FALLOFFS:
@@ -380,6 +386,36 @@ def _lights(where: str, table: dict, bounds: np.ndarray, diagonal: float) -> Lig
 # assembly
 
 
+def check_mesh_arrays(where: str, positions, faces) -> None:
+    """SceneError naming ``where`` unless ``positions`` is (V, 3) finite numbers within +-COORDINATE_LIMIT and
+    ``faces`` (F, 3) integers in 0..V-1 (what ``load_mesh`` guarantees for a file; arrays given in memory too)."""
+    p, f = np.asarray(positions), np.asarray(faces)
+    if p.ndim != 2 or p.shape[1] != 3 or not np.issubdtype(p.dtype, np.number) or np.iscomplexobj(p):
+        raise SceneError(f"{where}: positions: expected (V, 3) real numbers, got shape {p.shape} of {p.dtype}")
+    if f.ndim != 2 or f.shape[1] != 3 or not (np.issubdtype(f.dtype, np.integer) or f.size == 0):
+        raise SceneError(f"{where}: faces: expected (F, 3) integer vertex indices, got shape {f.shape} of {f.dtype}")
+    bad = ~np.isfinite(p).all(axis=1) | (np.abs(p) >= COORDINATE_LIMIT).any(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise SceneError(f"{where}: positions: vertex {i} is {p[i].tolist()}: coordinates must be finite and within "
+                         f"+-{COORDINATE_LIMIT:g}")
+    if f.size and (f.min() < 0 or f.max() >= len(p)):
+        raise SceneError(f"{where}: faces: indices must lie in 0..{len(p) - 1}, got {int(f.min())}..{int(f.max())}")
+
+
+def check_radiance_range(source: str, lights: Lights, materials: list[Material]) -> None:
+    """SceneError when the brightest radiance the scene can reach, intensity x (kd + ks) / radius^2 (a light at
+    its own radius), passes RADIANCE_LIMIT: float32 radiance would be infinite."""
+    near = 1.0 / lights.radius**2 if lights.falloff == "inverse-square" else 1.0
+    reflect = max(max(m.kd) + m.ks for m in materials)
+    peak = max(lights.intensity) * reflect * near
+    if peak > RADIANCE_LIMIT:
+        raise SceneError(f"{source}: lights.intensity {max(lights.intensity):g} x (kd + ks) {reflect:g} / "
+                         f"lights.radius^2 ({lights.radius:g}^2) reaches radiance {peak:.3g}, beyond "
+                         f"{RADIANCE_LIMIT:g} (float32 would overflow): lower the intensity or the materials, or "
+                         "raise the radius")
+
+
 def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=None, origins=None) -> Scene:
     """Build a :class:`Scene` from meshes already in memory: what every scene reader ends with.
 
@@ -392,14 +428,18 @@ def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=
     its mesh ``origins[k]`` (default "its mesh"). Raises SceneError when an object has no face of non-zero area:
     it would bake "successfully" with nothing but fallback normals.
     """
+    used = []  # each object's referenced vertices: one no face uses is never baked, so it sizes nothing
     for k, (name, p, f, _) in enumerate(objects):
+        where = wheres[k] if wheres else f"{source}: object[{k}] (name {_show(name)})"
+        origin = origins[k] if origins else "its mesh"
+        check_mesh_arrays(where, p, f)
         if not face_has_area(p, f).any():
-            where = wheres[k] if wheres else f"{source}: object[{k}] (name {_show(name)})"
-            origin = origins[k] if origins else "its mesh"
-            raise SceneError(f"{where}: every face of {origin} has zero area; nothing to bake")
-    all_pos = np.concatenate([o[1] for o in objects])
+            raise SceneError(f"{where}: every face of {origin} has zero area after placement; nothing to bake (faces "
+                             "with area in the file collapse when 'translate' takes them far from the origin)")
+        used.append(p[np.unique(f)])
+    all_pos = np.concatenate(used)
     bounds = np.stack([all_pos.min(axis=0), all_pos.max(axis=0)])
-    extent = max(float((o[1].max(axis=0) - o[1].min(axis=0)).max()) for o in objects)
+    extent = max(float((u.max(axis=0) - u.min(axis=0)).max()) for u in used)
     parts = list(objects)
     if floor is not None:
         resolution, margin, mat = floor
@@ -442,6 +482,7 @@ def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=
             "the float32 kernels; enlarge it with an object's 'scale'"
         )
     lights = _lights(where_lights, light_table, bounds, diagonal)
+    check_radiance_range(source, lights, materials)
     return Scene(
         positions=positions,
         faces=faces.astype(np.int32),

@@ -211,6 +211,7 @@ def bake(
     threshold_deg = light_cut_threshold(threshold_deg, full=full, hierarchy=hierarchy)
     check_hierarchy(hierarchy, threshold_deg, hierarchy_method)
     check_sh_order(sh_order)
+    check_jobs(jobs)
     codec = bake_codec(compress, *layout(scene, sh_order), out)
     from lodprt.precompute.distributed import check_cluster  # dask itself is imported only for a cluster
 
@@ -330,11 +331,14 @@ def light_cut_threshold(threshold_deg, *, full: bool, hierarchy: bool) -> float 
     return threshold_deg
 
 
-def check_hierarchy(hierarchy: bool, threshold_deg, method: str) -> None:
-    """Refuse a light cut without the hierarchy or with a bad threshold, and an unknown hierarchy build."""
-    if threshold_deg is not None and (not hierarchy or not (threshold_deg >= 0) or not math.isfinite(threshold_deg)):
+def check_hierarchy(hierarchy: bool, threshold_deg, method: str, *, name: str = "threshold_deg") -> None:
+    """Refuse a light cut without the hierarchy or with a bad threshold (called ``name`` in the message), and an
+    unknown hierarchy build."""
+    number = isinstance(threshold_deg, (int, float)) and not isinstance(threshold_deg, bool)
+    if threshold_deg is not None and (not hierarchy or not number or not (threshold_deg >= 0)
+                                      or not math.isfinite(threshold_deg)):
         raise LodprtError(
-            f"threshold_deg {threshold_deg!r}: the light cut needs the hierarchy and a finite threshold >= 0 degrees"
+            f"{name} {threshold_deg!r}: the light cut needs the hierarchy and a finite threshold >= 0 degrees"
         )
     if hierarchy:
         from lodprt.model.hierarchy_build import check_method
@@ -342,12 +346,20 @@ def check_hierarchy(hierarchy: bool, threshold_deg, method: str) -> None:
         check_method(method)
 
 
-def check_sh_order(sh_order: int) -> None:
-    """Refuse an SH order the float32 kernels do not cover."""
+def check_sh_order(sh_order: int, *, name: str = "sh_order") -> None:
+    """Refuse an SH order the float32 kernels do not cover (called ``name`` in the message)."""
     from lodprt.kernels import sh as ksh
 
-    if not 1 <= sh_order <= ksh.MAX_KERNEL_ORDER:
-        raise LodprtError(f"sh_order {sh_order}: must be >= 1; the float32 kernels go up to order {ksh.MAX_KERNEL_ORDER}")
+    whole = isinstance(sh_order, (int, np.integer)) and not isinstance(sh_order, bool)
+    if not whole or not 1 <= sh_order <= ksh.MAX_KERNEL_ORDER:
+        raise LodprtError(f"{name} {sh_order!r}: a whole number from 1; the float32 kernels go up to order "
+                          f"{ksh.MAX_KERNEL_ORDER}")
+
+
+def check_jobs(jobs) -> None:
+    """Refuse a thread count that is not a whole number >= 1 (None: the default)."""
+    if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1):
+        raise LodprtError(f"jobs {jobs!r}: the threads baking samples, a whole number >= 1 (or None)")
 
 
 def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[object, float]:

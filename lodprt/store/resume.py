@@ -80,7 +80,9 @@ def _json(value):
 def check_settings(where: str, recorded: dict | None, wanted: dict, *, prefix: str = "") -> None:
     """Refuse (``LodprtError`` naming the setting) when ``recorded`` differs from ``wanted`` in any key of it."""
     recorded = recorded or {}
-    for key, value in wanted.items():
+    # the scene's fingerprint first: a different scene changes settings derived from it (ray_offset, ...) too,
+    # and the user should hear about the scene, not about a setting they never gave
+    for key, value in sorted(wanted.items(), key=lambda kv: kv[0] != "fingerprint"):
         have = recorded.get(key, "(not recorded)")
         if _json(have) == _json(value):
             continue

@@ -83,6 +83,9 @@ def check_destination(path: str | os.PathLike, *, overwrite: bool, format: str =
                       what: str = "lodprt store") -> None:
     """Refuse to write over anything, unless ``overwrite`` and the thing there is a store of ``format``."""
     path = Path(path)
+    if path.is_symlink():  # replacing it would empty the folder it points to, or write there
+        raise StoreError(f"{path}: is a symbolic link (to {os.readlink(path)}); name the store's own folder, or "
+                         "remove the link")
     if not path.exists():
         if not path.parent.exists():
             raise StoreError(f"{path}: the folder {path.parent} does not exist")
@@ -173,6 +176,9 @@ def _write_owner(folder: Path) -> None:
 def _remove_tree(folder: Path) -> None:
     """Delete a partial or parked store, its markers (``zarr.json``, the owner file) last: killed half way, the
     rest stays recognisable and the next bake finishes the job."""
+    if folder.is_symlink():  # a link is removed, never what it points to
+        folder.unlink()
+        return
     markers = {"zarr.json", OWNER_FILE}
     for child in folder.iterdir():
         if child.name in markers:
@@ -290,6 +296,8 @@ class StoreWriter:
         import zarr
 
         self.path = Path(path)
+        if self.path.name in ("", ".", ".."):  # '.', '..', '/': the store needs a name of its own beside them
+            raise StoreError(f"{path}: name the store's folder (e.g. out.zarr), not {str(path)!r}")
         self.format, self.what = format, what
         self.partial = self.path.with_name(f"{self.path.name}.partial-{os.getpid()}")
         if adopt is not None:  # resume a dead writer's partial folder (one of dead_partials): it becomes ours
