@@ -29,6 +29,27 @@ def test_triangle_budget_law():
     assert toward_budget(0.5, 800, 1000, low) == 0.5 and toward_budget(0.5, 1000, 1000, low) == 0.5
 
 
+def test_triangle_budget_under_the_coarsest_cut_holds_the_bound_at_the_top():
+    """B-1 over a budget no cut meets rises to the steering's highest bound and stays there (it grew x1.25 a frame
+    without end: inf after about 3,200 frames, and then an error); a bound already over the top is kept."""
+    low, high = BOUND_RANGE
+    b = 0.5
+    for _ in range(400):
+        b = toward_budget(b, 10**6, 1, low, high)
+    assert b == high
+    assert toward_budget(20.0, 10**6, 1, low, high) == 20.0
+
+
+def test_unreachable_triangle_budget_on_a_runtime(store):
+    """A Runtime with triangle_budget=1 (the coarsest cut has more) on a still camera: after 60 frames the bound
+    is the highest of the steering's range, not 0.8 x 1.25^60."""
+    rt = Runtime(store, device="cpu", triangle_budget=1)
+    rt.set_camera(eye=(0.3, 1.0, 1.8), width=64, height=48)
+    for _ in range(60):
+        rt.update()
+    assert rt.error_bound == BOUND_RANGE[1]
+
+
 def test_frame_time_floor_law():
     """B-2 step by step against the law written out: m the mean of this timed frame and the last, the floor
     1.25 max(floor, bound) over the budget (capped at the highest bound), / 1.1 under 80% of it, 0 once under

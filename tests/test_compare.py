@@ -131,3 +131,60 @@ def test_diff_error_is_difference_over_white_as_compare(cut_store, tmp_path):
         assert same[key] == pytest.approx(got[key], rel=1e-5), key
     with pytest.raises(LodprtError, match="--scale"):
         diff_figure(store, 0, eye, tmp_path / "e.png", size=(120, 90), scale=-1.0)
+
+
+def test_error_against_full_uses_the_run_times_interpolation(cut_store):
+    """With LOD off, a frame of the thesis interpolation is the full mesh under it: measured against the full frame
+    of the same interpolation it is the same picture (PSNR over 100 dB: float rounding); against the default's
+    (what `frames --error-every` used to compare with) it reads the interpolations' difference instead."""
+    from lodprt.display.compare import error_against_full
+    from lodprt.display.render import Renderer
+    from lodprt.runtime.camera import Camera
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(cut_store)
+    rt = Runtime(store, device="cpu", lod=False, interpolation="thesis")
+    rt.set_lights([(0.05, 0.3, 0.1)])
+    rt.set_camera(Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), width=160, height=120))
+    frame = rt.update()
+    with Renderer() as r:
+        same = error_against_full(r, store, frame, rt.white, rt.interpolation)
+        other = error_against_full(r, store, frame, rt.white)
+    assert same["psnr_db"] > 100 and np.isfinite(other["psnr_db"]) and other["psnr_db"] < 60
+
+
+def test_the_pictures_white_is_the_cuts_white(cut_store, tmp_path):
+    """--white is the unit of the run time's errors too: a light 100x dimmer drawn with a white 100x lower is the
+    same picture, and the view cut is the same cut (it kept the store's white and coarsened to 19 dB)."""
+    from lodprt.display.compare import compare_figure
+    from lodprt.runtime.camera import Camera
+    from lodprt.runtime.sources import frame_source
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(cut_store)
+    assert frame_source(store, white=0.25).white == 0.25
+    white = frame_source(store).white
+    cam = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), width=160, height=120)
+    a = compare_figure(store, tmp_path / "a.png", lights=[(0.05, 0.3, 0.1)], camera=cam)
+    b = compare_figure(store, tmp_path / "b.png", lights=[(0.05, 0.3, 0.1)], camera=cam,
+                       colors=[store.intensity * 0.01], white=white * 0.01)
+    assert a["triangles_lod"] == b["triangles_lod"]
+    assert b["psnr_db"] == pytest.approx(a["psnr_db"], abs=0.05)
+
+
+def test_a_figure_of_panels_a_few_pixels_tall(cut_store, tmp_path):
+    """Panels under 14 pixels tall (64 x 8, 1 x 1) get a colour bar as tall as they are: the figure is written (its
+    bar's height was negative, a matplotlib error)."""
+    from lodprt.display.compare import compare_figure
+    from lodprt.display.error_figure import layout
+    from lodprt.runtime.camera import Camera
+    from lodprt.store.bake_store import open_store
+
+    assert layout(64, 8)["bar"][1:] == (0, layout(64, 8)["bar"][2], 8) and layout(1, 1)["bar"][3] == 1
+    assert layout(160, 120)["bar"][1] == 6 and layout(160, 120)["bar"][3] == 108
+    store = open_store(cut_store)
+    for w, h in ((64, 8), (1, 1)):
+        cam = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), width=w, height=h)
+        compare_figure(store, tmp_path / f"{w}x{h}.png", lights=[(0.05, 0.3, 0.1)], camera=cam)
+        assert (tmp_path / f"{w}x{h}.png").stat().st_size > 0

@@ -95,7 +95,7 @@ def test_sampled_error_on_every_pixel_is_the_measured_error(bunny_store, bound, 
     frame = rt.update(max_passes=10_000)
     want = measured(rt, frame)
     assert 20.0 < want < 60.0  # an error to measure
-    est, _ = frame_error.estimate(rt, frame.vertex_ids, frame.triangles)
+    est, _, _ = frame_error.estimate(rt, frame.vertex_ids, frame.triangles)
     assert abs(est - want) < 1.0, (est, want)
     monkeypatch.setattr(frame_error, "COVERAGE_RAYS", 10**9)
     assert frame_error.coverage_stride(200, 150) == 1

@@ -309,3 +309,30 @@ def test_distinct_ids_is_numpy_unique(n, size):
     np.testing.assert_array_equal(ids, want_ids)
     np.testing.assert_array_equal(inverse, want_inverse.ravel())
     np.testing.assert_array_equal(ids[inverse].reshape(values.shape), values)
+
+
+def test_a_scene_small_on_screen_is_estimated_on_a_finer_grid(bunny_bake):
+    """Seen from 25x the default distance the scene covers a few hundred pixels of 400 x 300: on E-2's default
+    grid (coverage_stride) fewer than MIN_COVERED rays meet it, so the grid is halved until enough do or it is
+    every pixel; the estimate is then the one made on that grid directly (it was made on the default grid: inf
+    when no ray met the scene, far too optimistic when few did)."""
+    from lodprt.runtime import frame_error
+    from lodprt.runtime.camera import Camera, default_eye, scene_centre
+    from lodprt.runtime.session import Runtime
+    from lodprt.store.bake_store import open_store
+
+    store = open_store(bunny_bake)
+    centre = np.asarray(scene_centre(store))
+    eye = centre + 25.0 * (np.asarray(default_eye(store)) - centre)
+    rt = Runtime(store, device="cpu")
+    rt.set_lights(store.light_positions[[0, 1, 3, 4]].mean(0)[None])
+    rt.set_camera(Camera(eye=tuple(eye), target=tuple(centre), width=400, height=300))
+    frame = rt.update()
+    coarse = frame_error.coverage_stride(400, 300)
+    few = frame_error.sampled_error(rt, frame.vertex_ids, frame.triangles, frame_error.reference(rt, coarse))
+    assert few.covered < frame_error.MIN_COVERED  # the precondition
+    est, _, stride = frame_error.estimate(rt, frame.vertex_ids, frame.triangles)
+    assert stride < coarse
+    fine = frame_error.sampled_error(rt, frame.vertex_ids, frame.triangles, frame_error.reference(rt, stride))
+    assert fine.covered >= frame_error.MIN_COVERED or stride == 1
+    assert est == fine.psnr() and np.isfinite(est)

@@ -308,3 +308,15 @@ def test_interpolation_flag_on_every_point_light_command(box_shadow, tmp_path, g
         assert main([str(argv[0]), str(store.path), *map(str, argv[1:])]) == 0, argv[0]
     img = np.load(tmp_path / "f.npy")
     assert img.shape == (48, 64, 3) and img.max() > 0
+
+
+def test_light_colours_past_the_bakes_intensity_limit_are_refused():
+    """A colour of 1e39 (past float32) or 1e13 (past the bake's intensity limit, 1e12) is refused naming the colours
+    (1e39 drew NaN pixels); 1e12 is accepted."""
+    from lodprt.errors import LodprtError
+    from lodprt.runtime.lights import check_lights
+
+    for big in (1e39, 1e13):
+        with pytest.raises(LodprtError, match=r"light colors: each RGB intensity at most 1e\+12"):
+            check_lights([(0, 1, 0)], [(big, 1, 1)], (1, 1, 1))
+    assert check_lights([(0, 1, 0)], [(1e12, 1, 1)], (1, 1, 1))[1].max() == 1e12

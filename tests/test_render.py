@@ -60,6 +60,30 @@ def test_bad_camera_is_a_clear_error():
         Camera(eye=(0, 1, 2), target=(0, 0, 0), up=(0, 0, 0))
 
 
+def test_camera_size_is_whole_pixels():
+    """320.0 x 240.0 is 320 x 240 (ints: it failed inside Warp's array allocation); 320.5, '320', True, nan and 0
+    are refused naming the size."""
+    cam = Camera(eye=(0, 1, 2), target=(0, 0, 0), width=320.0, height=np.int64(240))
+    assert (cam.width, cam.height) == (320, 240) and type(cam.width) is int and type(cam.height) is int
+    for bad in (320.5, "320", True, float("nan"), 0):
+        with pytest.raises(LodprtError, match="camera size: .* whole numbers >= 1"):
+            Camera(eye=(0, 1, 2), target=(0, 0, 0), width=bad)
+
+
+def test_tone_scale_range():
+    """2^exposure / white, or a clear error: exposure 2000 (an OverflowError from Python's float power), beyond
+    100 stops, and a scale past float32 (exposure 100 over white 1e-10) are refused naming the option."""
+    from lodprt.runtime.frames import tone_scale
+
+    assert tone_scale(2.0, 3.0) == 4.0 and tone_scale(1.0, -100) == 2.0**-100
+    with pytest.raises(LodprtError, match=r"exposure 2000\.0: at most 100 stops"):
+        tone_scale(1.0, 2000.0)
+    with pytest.raises(LodprtError, match=r"2\^--exposure / --white = .* beyond float32"):
+        tone_scale(1e-10, 100.0, "--")
+    with pytest.raises(LodprtError, match="white 0.0 must be > 0"):
+        tone_scale(0.0, 0.0)
+
+
 def test_tone_map_srgb():
     """Tone mapping clips at white and applies the sRGB transfer curve (0.5 linear -> 0.7354)."""
     out = tone_map(np.array([[0.0, 0.5, 2.0]]), white=1.0)

@@ -586,3 +586,34 @@ def test_host_array_is_a_view_on_the_cpu(device):
     assert cast.dtype == wp.int32 and cast.numpy().tolist() == [0, 1, 2, 3, 4]
     pts = host_array(np.ones((3, 3)), np.float32, wp.vec3, device)
     assert pts.shape == (3,) and np.allclose(pts.numpy(), 1.0)
+
+
+def test_cli_frames_json_is_strict_json(bunny_bake, capsys):
+    """`frames --full --error-every 1 --json`: the full mesh against itself has PSNR inf, written null (it was
+    Infinity, which strict parsers refuse)."""
+    import json
+
+    pytest.importorskip("moderngl")
+    from lodprt.cli.main import main
+
+    assert main(["frames", str(bunny_bake), "--frames", "2", "--full", "--error-every", "1", "--size", "80", "60",
+                 "--json"]) == 0
+
+    def refuse(name):
+        raise ValueError(f"not strict JSON: {name}")
+
+    doc = json.loads(capsys.readouterr().out, parse_constant=refuse)
+    assert [f["psnr_db"] for f in doc["frames"]] == [None, None]
+
+
+def test_lod_off_reports_no_estimate(bunny_bake):
+    """E-3 belongs to the cut: with LOD switched off the frame reports none (it reported the last cut's), and
+    with LOD on again the cut's."""
+    rt = Runtime(open_store(bunny_bake), device="cpu")
+    rt.set_camera(eye=(0.3, 1.0, 1.8), width=80, height=60)
+    assert rt.update().stats["estimated_psnr_db"] is not None
+    rt.set_lod(False)
+    frame = rt.update()
+    assert frame.stats["estimated_psnr_db"] is None and frame.stats["estimate_stride_px"] is None
+    rt.set_lod(True)
+    assert rt.update().stats["estimated_psnr_db"] is not None

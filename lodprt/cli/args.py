@@ -172,6 +172,14 @@ def check_colors(colors, lights) -> None:
         raise LodprtError(f"--color: {len(colors)} given for {len(lights)} --light; give one per light or none")
 
 
+def check_tone(white, exposure) -> None:
+    """Refuse ``--white`` (None: the default) not a positive finite radiance and ``--exposure`` out of the tone
+    mapping's range, named as the options, before any work (``lodprt.runtime.frames.tone_scale``)."""
+    from lodprt.runtime.frames import tone_scale
+
+    tone_scale(1.0 if white is None else white, exposure, "--")
+
+
 def at_least(flag: str, value, low: int, note: str = "") -> None:
     """Refuse ``flag value`` below ``low`` (``None``, not given, passes)."""
     if value is not None and value < low:

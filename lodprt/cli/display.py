@@ -149,6 +149,7 @@ def _view_cut(args) -> dict:
 
 
 def _draw_options(args) -> dict:
+    cli_args.check_tone(args.white, args.exposure)
     return {"wireframe": args.wireframe, "per_vertex": args.per_vertex, "exposure": args.exposure,
             "white": args.white, "light_markers": not args.no_markers}
 

@@ -44,6 +44,7 @@ def cmd_export(args) -> int:
     from lodprt.store.bake_store import open_store
 
     check_glb_output(args.out, args.overwrite)  # before the store is read and lit
+    cli_args.check_tone(args.white, args.exposure)
     if args.light is not None:
         cli_args.check_colors(args.color, args.light)
     store = open_store(args.store)

@@ -5,6 +5,7 @@ error against the full mesh), and what setting each frame's lights cost: the lig
 from __future__ import annotations
 
 import json
+import math
 import time
 
 from lodprt.cli import args as cli_args
@@ -40,7 +41,8 @@ def register(sub) -> None:
     fr.add_argument("--error-every", type=int, default=0, metavar="K",
                     help="every K frames, draw the frame and the full-mesh frame offscreen (--size) and report the "
                          "image error (PSNR clipped at white, relative RMSE); 0: never (default)")
-    cli_args.add_json(fr, "one JSON object (frames and a summary) instead of the table")
+    cli_args.add_json(fr, "one JSON object (frames and a summary) instead of the table; strict JSON: a PSNR of inf "
+                          "(no difference) and any other non-finite number read null")
     fr.set_defaults(handler=cmd_frames)
 
 
@@ -78,7 +80,8 @@ def cmd_frames(args) -> int:
             errors.close()
     summary = _frames_summary(args, rt, store, rows, at_open, open_seconds)
     if args.json:
-        print(json.dumps({"summary": summary, "frames": rows}, indent=2))
+        # strict JSON: an infinite PSNR (no difference) or any other non-finite number is written as null
+        print(json.dumps(finite_or_null({"summary": summary, "frames": rows}), indent=2, allow_nan=False))
         return 0
     _print_frames(rows, summary, rt)
     return 0
@@ -95,6 +98,17 @@ def _runtime(store, **options):
     return rt
 
 
+def finite_or_null(value):
+    """``value`` (dicts, lists, numbers) with every non-finite float as None, for strict JSON."""
+    if isinstance(value, dict):
+        return {k: finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_or_null(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 class _FrameErrors:
     """The image error of run-time frames against the full mesh under the same camera and lights."""
 
@@ -107,7 +121,7 @@ class _FrameErrors:
     def measure(self, frame) -> dict:
         from lodprt.display.compare import error_against_full
 
-        numbers = error_against_full(self.renderer, self.store, frame, self.rt.white)
+        numbers = error_against_full(self.renderer, self.store, frame, self.rt.white, self.rt.interpolation)
         return {"psnr_db": numbers["psnr_db"], "relative_rmse": numbers["relative_rmse"]}
 
     def close(self) -> None:

@@ -33,7 +33,7 @@ def compare_figure(store, out, *, lights, camera, colors=None, error_bound: floa
     if out.suffix.lower() == ".exr":
         check_exr()
     source = frame_source(store, criterion=criterion, lod=True, interpolation=interpolation, outside=outside,
-                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
+                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr, white=white)
     cut_criterion = getattr(source, "criterion", None)  # None: a store without a hierarchy
     source.set_lights(lights, colors)
     source.set_camera(camera)
@@ -82,8 +82,9 @@ def frame_error(renderer, lod, full, white: float, *, per_vertex: bool = False) 
     return error_numbers(lin_lod, lin_full, white)
 
 
-def error_against_full(renderer, store, frame, white: float) -> dict:
+def error_against_full(renderer, store, frame, white: float, interpolation: str = DEFAULT_INTERPOLATION) -> dict:
     """``frame_error``'s numbers for a run-time ``frame`` against the full-resolution frame of ``store`` under the
-    same camera and lights (``lodprt.runtime.frames.full_frame``)."""
-    full = full_frame(store, frame.camera, lights=frame.lights, colors=frame.light_colors)
+    same camera and lights (``lodprt.runtime.frames.full_frame``) and the run time's ``interpolation``: the view
+    cut's error, not the interpolations' difference."""
+    full = full_frame(store, frame.camera, lights=frame.lights, colors=frame.light_colors, interpolation=interpolation)
     return frame_error(renderer, frame, full, white)[0]

@@ -83,7 +83,9 @@ def layout(width: int, height: int) -> dict:
     xs = [k * (width + GAP) for k in range(3)]
     bar_x = xs[2] + width + GAP
     size = (bar_x + BAR + BAR_TEXT, height + TITLE)
-    return {"size": size, "panels": [(x, 0) for x in xs], "bar": (bar_x, 6, BAR, height - 12)}
+    # the bar 6 px in from the panels' top and bottom; on panels under 14 px, as tall as they are (at least 1 px)
+    inset = 6 if height >= 14 else 0
+    return {"size": size, "panels": [(x, 0) for x in xs], "bar": (bar_x, inset, BAR, max(height - 2 * inset, 1))}
 
 
 def panel_figure(out, images, titles, vmax: float, suptitle: str) -> dict:

@@ -29,7 +29,7 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.runtime.camera import Camera, default_eye, scene_centre
-from lodprt.runtime.frames import auto_white
+from lodprt.runtime.frames import auto_white, tone_scale
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.sources import frame_source
 from lodprt.version import __version__
@@ -59,12 +59,13 @@ def check_glb_output(out, overwrite: bool) -> Path:
 def export_frame(store, *, sample: int | None = None, lights=None, colors=None, eye=None, target=None,
                  up=(0.0, 1.0, 0.0), fov: float = 40.0, size=(800, 600), lod: bool = True,
                  error_bound: float | None = None, alpha: float | None = None, criterion="screen",
-                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None, outside: str = "clamp"):
+                 interpolation: str = DEFAULT_INTERPOLATION, target_psnr=None, outside: str = "clamp",
+                 white: float | None = None):
     """(frame, source) for the export: the run time (or full-resolution frames for stores without a hierarchy)
     exactly as ``lodprt render`` draws it. ``sample`` K lights the scene with stored light sample K with the bake's
     intensity (a light there, by the thesis interpolation, whose T-12 weights select that sample alone);
     ``lights`` (L, 3) with ``colors`` are point lights lit by ``interpolation``; neither: the middle light sample.
-    ``eye`` defaults to the three-quarter view."""
+    ``eye`` defaults to the three-quarter view; ``white``: the run time's (its errors' unit; default the store's)."""
     if sample is not None and lights is not None:
         raise LodprtError("--sample and --light exclude each other")
     if lights is None:
@@ -80,7 +81,7 @@ def export_frame(store, *, sample: int | None = None, lights=None, colors=None, 
     target = tuple(target) if target is not None else scene_centre(store)
     camera = Camera(eye=eye, target=target, up=tuple(up), fov=fov, width=int(size[0]), height=int(size[1]))
     source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation, outside=outside,
-                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr)
+                          error_bound=error_bound, alpha=alpha, target_psnr=target_psnr, white=white)
     source.set_lights(lights, colors)
     source.set_camera(camera)
     return source.update(), source
@@ -101,9 +102,8 @@ def vertex_colors_of(frame, mode: str, *, white: float | None, exposure: float) 
         raise LodprtError(f"--vertex-colors {mode!r}: choose one of {', '.join(VERTEX_COLORS)}")
     if white is None:
         white = auto_white(rad)
-    if not (np.isfinite(white) and white > 0 and np.isfinite(exposure)):
-        raise LodprtError(f"tone mapping: --white {white!r} must be > 0 and --exposure {exposure!r} finite")
-    return np.clip(rad * (2.0**exposure / white), 0.0, 1.0).astype(np.float32), {"white": float(white),
+    scale = tone_scale(white, exposure, "--")
+    return np.clip(rad * scale, 0.0, 1.0).astype(np.float32), {"white": float(white),
                                                                                    "exposure": float(exposure)}
 
 
@@ -284,7 +284,7 @@ def export_glb(store, out, *, sample: int | None = None, lights=None, colors=Non
     frame, source = export_frame(store, sample=sample, lights=lights, colors=colors, eye=eye, target=target, up=up,
                                  fov=fov, size=size, lod=lod, error_bound=error_bound, alpha=alpha,
                                  criterion=criterion, interpolation=interpolation, target_psnr=target_psnr,
-                                 outside=outside)
+                                 outside=outside, white=white)
     if vertex_colors == "display" and white is None:
         white = getattr(source, "white", None) or auto_white(frame.radiance)
     extras = {"store": str(store.path), "sample": sample, "lod": bool(getattr(source, "lod", False))}

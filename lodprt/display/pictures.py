@@ -189,7 +189,8 @@ def render_to_file(store, out, *, lights, camera, colors=None, error_bound: floa
     if out.suffix.lower() == ".exr":
         check_exr()
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside,
+                          white=draw.get("white"))  # the cut's errors in the picture's white
     source.set_lights(lights, colors)
     cam = source.set_camera(camera) or camera
     linear = out.suffix.lower() in LINEAR_SUFFIXES
@@ -241,7 +242,8 @@ def turntable(store, out, *, lights, camera, colors=None, frames: int = 36, ligh
         raise LodprtError(f"{out}: the folder {out.parent} does not exist")
     lights = np.asarray(lights, np.float64).reshape(-1, 3)
     source = frame_source(store, error_bound=error_bound, alpha=alpha, lod=lod, criterion=criterion,
-                          interpolation=interpolation, target_psnr=target_psnr, outside=outside)
+                          interpolation=interpolation, target_psnr=target_psnr, outside=outside,
+                          white=draw.get("white"))  # the cut's errors in the picture's white
     images = []
     with Renderer() as renderer, _aborting(video):
         for k in range(frames):

@@ -21,7 +21,7 @@ import numpy as np
 
 from lodprt.errors import LodprtError
 from lodprt.runtime.camera import camera_matrices, look_at, perspective
-from lodprt.runtime.frames import auto_white
+from lodprt.runtime.frames import auto_white, tone_scale
 
 log = logging.getLogger(__name__)
 
@@ -505,8 +505,7 @@ class Renderer:
         mvp = (proj @ view).T.astype(np.float32).tobytes()  # column-major
         if white is None:
             white = getattr(frame, "white", None) or auto_white(frame.radiance)
-        if not (np.isfinite(white) and white > 0 and np.isfinite(exposure)):
-            raise LodprtError(f"tone mapping: white {white!r} must be > 0 and exposure {exposure!r} finite")
+        scale = tone_scale(white, exposure)
         target.use()
         target.viewport = (0, 0) + size
         ctx = self.ctx
@@ -523,7 +522,7 @@ class Renderer:
                                                                 index_element_size=4)  # order 1 ignores normals
             prog["mvp"].write(mvp)
             uniforms = {"eye": tuple(float(x) for x in cam.eye), "tex_width": up["width"], "linear_out": bool(linear),
-                        "scale": float(2.0**exposure / white), "wireframe": bool(wireframe),
+                        "scale": scale, "wireframe": bool(wireframe),
                         "wire_color": tuple(float(c) for c in wire_color), "coef": 0}
             for name, value in uniforms.items():
                 if name in prog:  # the GLSL compiler drops unused ones (order 1 has no view dependence)

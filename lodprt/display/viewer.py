@@ -266,7 +266,7 @@ class Viewer:
 
         t_open = time.perf_counter()
         self.source = frame_source(store, criterion=criterion, lod=lod, interpolation=interpolation,
-                                   frame_ms=frame_ms, progress=opened)
+                                   frame_ms=frame_ms, progress=opened, white=white)
         self.open_seconds = time.perf_counter() - t_open  # the run time's set-up, its samples completed at open
         self.samples = sample_cache(self.source)  # the run time's (None: full resolution)
         if self.samples is not None:  # later completions report through the frame that needs them (_completing)

@@ -1,8 +1,9 @@
 """The frame's budgets (docs/RUNTIME.md, budgets): how the run time's error bound follows a triangle budget
 (B-1) and a frame-time budget (B-2), after each frame.
 
-    B-1   triangle budget T: bound x1.25 when the frame had more than T triangles, / 1.1 when under 0.8 T, else kept
-          (the bound is steered toward the budget; the target_psnr's steering, E-4, is off)
+    B-1   triangle budget T: bound x1.25 when the frame had more than T triangles (up to the steering's highest
+          bound: a budget under the coarsest cut's triangles holds the bound there, never past it), / 1.1 when
+          under 0.8 T, else kept (the bound is steered toward the budget; the target_psnr's steering, E-4, is off)
     B-2   frame-time budget F ms (Hoppe 1997's regulation of the frame rate, on the bound): after a frame in motion
           that made no estimate (E-1) and no pins (E-5), m = the mean of its time and the last such frame's; over F,
           the floor becomes 1.25 max(floor, bound), at most the steering's highest bound; under 0.8 F, floor / 1.1
@@ -22,11 +23,12 @@ from lodprt.runtime.settings import check_frame_ms, check_triangle_budget
 UP, DOWN, LOW = 1.25, 1.1, 0.8
 
 
-def toward_budget(bound: float, triangles: int, budget: int, lowest: float) -> float:
+def toward_budget(bound: float, triangles: int, budget: int, lowest: float, highest: float = float("inf")) -> float:
     """B-1: the bound steered toward a triangle budget: x1.25 above it (from ``lowest`` at least, the lowest
-    bound: x1.25 of 0 would stay 0), /1.1 under 80% of it, else unchanged."""
+    bound: x1.25 of 0 would stay 0; up to ``highest``, and a bound already over it is kept), /1.1 under 80% of it,
+    else unchanged."""
     if triangles > budget:
-        return max(bound, lowest) * UP
+        return max(min(max(bound, lowest) * UP, highest), bound)
     if triangles < LOW * budget:
         return bound / DOWN
     return bound
@@ -54,7 +56,7 @@ class FrameBudgets:
         """The bound for the next frame after one at ``bound`` with ``triangles`` that took ``ms`` (``timed``: in
         motion, without an estimate or pins; B-2 reads only those frames' times)."""
         if self.triangles is not None:
-            bound = toward_budget(bound, triangles, self.triangles, self.lowest)  # B-1
+            bound = toward_budget(bound, triangles, self.triangles, self.lowest, self.highest)  # B-1
         self.timed = self.frame_ms is not None and bool(timed)
         if self.timed:  # B-2
             m = ms if self._last is None else 0.5 * (ms + self._last)

@@ -46,8 +46,16 @@ class Camera:
             raise LodprtError(f"camera up: {list(self.up)} has no direction; give a non-zero vector (default 0 1 0)")
         if not 0.0 < float(self.fov) < 180.0:
             raise LodprtError(f"camera fov: {self.fov} degrees; must lie strictly between 0 and 180")
-        if int(self.width) < 1 or int(self.height) < 1:
-            raise LodprtError(f"camera size: {self.width} x {self.height}; width and height must be >= 1")
+        size = []
+        for name in ("width", "height"):  # whole pixels: 320.0 is 320, 320.5 or "320" is refused
+            v = getattr(self, name)
+            ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and np.isfinite(v)
+            if not ok or float(v) != int(v) or int(v) < 1:
+                raise LodprtError(f"camera size: {self.width!r} x {self.height!r}; width and height must be whole "
+                                  "numbers >= 1")
+            size.append(int(v))
+        object.__setattr__(self, "width", size[0])
+        object.__setattr__(self, "height", size[1])
         if self.near is not None and self.far is not None and not 0.0 < self.near < self.far:
             raise LodprtError(f"camera near/far: {self.near}, {self.far}; need 0 < near < far")
 

@@ -8,7 +8,7 @@ per-node bound toward a stated PSNR in motion, and the refinement of a still fra
           the frame relit them), their positions, normals and coefficients interpolated at the hit and evaluated
           toward the eye, as the renderer draws a fragment (``kernels.runtime.hit_radiance``)
     E-2   the rays: one per pixel (the first frame, a still one) or per square cell of about COVERAGE_RAYS cells
-          (in motion) (``screen_hits``, ``kernels.runtime.first_hits`` on the full mesh's BVH, ``reference``, and
+          (in motion), halved while fewer than MIN_COVERED of them are covered (``screen_hits``, ``kernels.runtime.first_hits`` on the full mesh's BVH, ``reference``, and
           on a BVH of the cut's mesh); covered: either mesh non-black there
     E-3   PSNR_est = -10 log10(MSE)                         (display units of white, as ``error_numbers``)
     E-4   the bound b for the next frames: the largest bound whose cut's E-3 meets the target, searched by
@@ -139,21 +139,25 @@ class Steering:
 
 
 def estimate(rt, vid: np.ndarray, triangles: np.ndarray, steering: Steering | None = None,
-             coefficients: np.ndarray | None = None, *, stride: int | None = None) -> tuple[float, float | None]:
+             coefficients: np.ndarray | None = None, *, stride: int | None = None) -> tuple[float, float | None, int]:
     """(E-3 of the Runtime ``rt``'s current cut, E-4's bound for the next frames from ``steering`` or None without
-    one): E-1 sampled on E-2's rays (``sampled_error``: the cut's mesh, ``vid`` (A,) its vertices, ``triangles``
-    indices into them, ``coefficients`` their relit ones when the frame has them, against the full mesh, both relit
-    under the current lights; ``stride``: the cells' side in pixels, default ``coverage_stride``, 1 on every
-    pixel); E-4 shares it out over the cut's coarse nodes in proportion to their modelled terms (culling,
+    one, the cells' side in pixels it sampled): E-1 sampled on E-2's rays (``sampled_error``: the cut's mesh, ``vid``
+    (A,) its vertices, ``triangles`` indices into them, ``coefficients`` their relit ones when the frame has them,
+    against the full mesh, both relit under the current lights; ``stride``: the cells' side in pixels, default
+    ``coverage_stride``, 1 on every pixel; halved while fewer than MIN_COVERED rays meet what either mesh shows,
+    ``finer``); E-4 shares it out over the cut's coarse nodes in proportion to their modelled terms (culling,
     footprint and S-1 error from ``Runtime.node_errors(detail_only=True)``, the residual from
     ``node_mean_square``)."""
     cam = rt.camera
     ref = reference(rt, stride)
     sample = sampled_error(rt, vid, triangles, ref, coefficients)
+    while sample.covered < MIN_COVERED and (finer := ray_stride(cam.width, cam.height, ref.stride // 2)) < ref.stride:
+        ref = reference(rt, finer)  # E-2: a scene small on screen gets a finer grid, down to every pixel
+        sample = sampled_error(rt, vid, triangles, ref, coefficients)
     cov = ref.cell * sample.covered
     est = sample.psnr()
     if steering is None:
-        return est, None
+        return est, None, ref.stride
     act = np.flatnonzero(rt.cut.active)
     nodes = act[act >= rt.h.num_vertices]
     ne = rt.node_errors(nodes, exact=False, detail_only=True)
@@ -167,7 +171,7 @@ def estimate(rt, vid: np.ndarray, triangles: np.ndarray, steering: Steering | No
     model = float(sse.sum())
     if model > 0:  # E-4: the nodes' shares of the sampled error, in proportion to their modelled terms
         sse *= sample.mean * cov / model
-    return est, steering.next_bound(rt.error_bound, est, ne.error, sse, cov)
+    return est, steering.next_bound(rt.error_bound, est, ne.error, sse, cov), ref.stride
 
 
 #: E-4: frames between two estimates of a moving frame's error while the steering searches (twice as many once
@@ -426,6 +430,9 @@ def cut_bvh(rt, vid: np.ndarray, triangles: np.ndarray):
 
 #: E-1, E-2: about this many primary rays per frame, one per square cell of the screen (at least a pixel)
 COVERAGE_RAYS = 30_000
+#: E-2: the fewest rays of the grid that must meet what either mesh shows: with fewer (a scene small on screen, or
+#: none met: an E-3 of inf), the grid is halved until they do or it is every pixel, where the sample is the frame
+MIN_COVERED = 2_000
 #: E-2: at most this many rays in a frame's estimate, on every pixel up to a 4096 x 4096 frame (the full mesh's side,
 #: kept for the camera, holds 28 bytes a ray: about 470 MB); a larger frame takes a ray every few pixels each way
 MAX_RAYS = 1 << 24

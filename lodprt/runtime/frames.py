@@ -200,3 +200,25 @@ def auto_white(radiance) -> float:
     r = np.asarray(radiance, np.float64)
     pos = r[r > 0]
     return float(np.percentile(pos, 99)) if pos.size else 1.0
+
+
+#: The largest exposure in stops either way: 2^100 stays well inside float32, which the shaders scale in.
+EXPOSURE_LIMIT = 100.0
+
+
+def tone_scale(white, exposure, prefix: str = "") -> float:
+    """The tone mapping's 2^exposure / white (display = clip(scale L, 0, 1)), or LodprtError naming
+    ``{prefix}white`` / ``{prefix}exposure`` when white is not > 0, exposure not finite within +-EXPOSURE_LIMIT
+    stops, or the scale beyond float32."""
+    from lodprt.errors import LodprtError
+
+    if not (np.isfinite(white) and white > 0 and np.isfinite(exposure)):
+        raise LodprtError(f"tone mapping: {prefix}white {white!r} must be > 0 and {prefix}exposure {exposure!r} finite")
+    if abs(exposure) > EXPOSURE_LIMIT:
+        raise LodprtError(f"tone mapping: {prefix}exposure {exposure!r}: at most {EXPOSURE_LIMIT:g} stops either way")
+    scale = 2.0 ** float(exposure) / float(white)
+    if not 0 < scale < float(np.finfo(np.float32).max):
+        raise LodprtError(f"tone mapping: 2^{prefix}exposure / {prefix}white = {scale:g} is beyond float32; raise "
+                          f"{prefix}white or lower {prefix}exposure")
+    return scale
+

@@ -14,7 +14,8 @@ from lodprt.model.inside import inside_mesh
 
 log = logging.getLogger(__name__)
 
-WHY = {"light": "it lights that mesh's inside only", "eye": "the frame shows that mesh's culled inside (black)"}
+WHY = {"light": "it lights that mesh's inside only", "eye": "the frame shows the back of that mesh's faces, shaded with the outside's radiance, "
+                                                "not a view of its inside"}
 
 
 def object_box(positions: np.ndarray, faces: np.ndarray):

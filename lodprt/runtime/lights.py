@@ -28,6 +28,7 @@ import logging
 import numpy as np
 
 from lodprt.errors import LodprtError
+from lodprt.model.scene import INTENSITY_LIMIT
 
 log = logging.getLogger(__name__)
 
@@ -133,5 +134,8 @@ def check_lights(positions, colors, intensity) -> tuple[np.ndarray, np.ndarray]:
         col = np.repeat(col[None, :], len(pos), axis=0)
     if col.shape != pos.shape or not np.isfinite(col).all() or (col < 0).any():
         raise LodprtError(f"light colors: expected ({len(pos)}, 3) finite RGB intensities >= 0, got {col.tolist()}")
+    if (col > INTENSITY_LIMIT).any():  # the bake's own limit: radiance = coefficients x intensity stays in float32
+        raise LodprtError(f"light colors: each RGB intensity at most {INTENSITY_LIMIT:g} (the bake's limit, which keeps "
+                          f"float32 radiance finite), got {col.max():g}")
     return pos, col
 

@@ -395,10 +395,9 @@ class Runtime:
         """E-1..E-3 of the current cut (``estimated_psnr``; ``vid``, ``tri``: its mesh as ``_cut_mesh`` gives it,
         ``coefficients`` its relit ones or None; on E-2's grid, or every pixel) and, with a target_psnr and
         ``steer``, E-4: the bound for the next frames (``frame_error.Steering``, settled within STEER_STEP)."""
-        self.estimate_stride = frame_error.ray_stride(self.camera.width, self.camera.height,
-                                                      1 if every_pixel else None)
-        self.estimated_psnr, new = frame_error.estimate(self, vid, tri, self.steering if steer else None,
-                                                        coefficients, stride=self.estimate_stride)
+        stride = frame_error.ray_stride(self.camera.width, self.camera.height, 1 if every_pixel else None)
+        self.estimated_psnr, new, self.estimate_stride = frame_error.estimate(
+            self, vid, tri, self.steering if steer else None, coefficients, stride=stride)
         if new is not None and new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
 
@@ -490,8 +489,9 @@ class Runtime:
             **self.criterion.settings(),  # the active criterion's knobs only (error_bound steered)
             "lights_clamped": int(self.lights_clamped),
             "shadow_rays": int(self.lighting.rays),  # M-3: rays cast toward the lights
-            "estimated_psnr_db": self.estimated_psnr,  # E-3 (None without a target_psnr)
-            "estimate_stride_px": self.estimate_stride,  # its cells (1: every pixel, the first and still frames)
+            # E-3 of the cut (None without a target_psnr, and with LOD off: the full mesh has no error to estimate)
+            "estimated_psnr_db": self.estimated_psnr if self.lod else None,
+            "estimate_stride_px": self.estimate_stride if self.lod else None,  # its cells (1: every pixel)
             "pinned_nodes": self.refinement.pins,  # E-5 (first and still frames)
             **self.budgets.settings(),  # B-1, B-2: the budgets, and the bound's floor under a frame-time budget
             "ms_cut": 1e3 * (t1 - t0 + steer), "ms_triangulate": 1e3 * (t2 - t1 + waited),
