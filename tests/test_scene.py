@@ -494,3 +494,12 @@ def test_one_number_is_grey_for_colours_only(tmp_path):
     for key, value in (("rotate", 90), ("translate", 5)):
         with pytest.raises(SceneError, match=rf"object\[0\]\.{key}: expected a list of 3 numbers, got {value}"):
             load_scene(write(tmp_path, "v.toml", f'[[object]]\nmesh = "t.obj"\n{key} = {value}\n'))
+
+
+def test_an_unknown_file_type_is_named(tmp_path):
+    """A scene file without .toml or a mesh of a type no reader knows names the suffix and what lodprt reads (it was
+    trimesh's NotImplementedError with the absolute path)."""
+    for name in ("s.yaml", "m.dat"):
+        with pytest.raises(SceneError, match=rf"{name}: not a file type lodprt reads \(\.{name[2:]}\): a scene file "
+                                             r"ends in \.toml; a mesh in \.obj"):
+            load_scene(write(tmp_path, name, "v 0 0 0\n"))

@@ -169,6 +169,10 @@ def _read_trimesh(path: Path, data: bytes | None) -> tuple[np.ndarray, np.ndarra
                 loaded = trimesh.load_scene(io.BytesIO(data), file_type=suffix_of(path)[1:], process=False,
                                             maintain_order=True)
             mesh = loaded.to_mesh()
+    except NotImplementedError as exc:  # trimesh knows no reader for the suffix
+        raise SceneError(f"{path}: not a file type lodprt reads ({suffix_of(path) or 'no suffix'}): a scene file ends "
+                         "in .toml; a mesh in .obj, .ply, .stl, .off, .glb or .gltf (each optionally .gz, .xz or "
+                         ".bz2)") from exc
     except Exception as exc:  # trimesh raises many types for bad files
         raise SceneError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from exc
     clouds = [g.vertices for g in loaded.geometry.values() if isinstance(g, trimesh.PointCloud)]
