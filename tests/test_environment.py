@@ -272,3 +272,14 @@ def test_order6_on_a_16x16_cube_beats_the_patent_figure():
         got = env.radiance().T @ E.projection_weights("cube", 16, 6)
         errs.append(np.sum((got[0] - c) ** 2) / np.sum(c**2))
     assert np.mean(errs) < 2e-4 and np.max(errs) < 5e-4
+
+
+def test_glossy_order_zero_is_refused_not_replaced():
+    """--glossy-order 0 was read as 'not given' (the SH order) and baked; it is refused before any work, glossy
+    vertices or not, as --sh-order 0 is."""
+    from lodprt.errors import LodprtError
+    from lodprt.model.scene import demo_scene
+    from lodprt.precompute.transfer import bake_transfer
+
+    with pytest.raises(LodprtError, match="glossy order 0: the transfer kernels offer orders 1..8"):
+        bake_transfer(demo_scene(floor_resolution=2), None, glossy_order=0)

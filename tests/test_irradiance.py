@@ -149,3 +149,28 @@ def test_ringing_of_a_directional_light_is_reported(capsys, tmp_path):
     assert np.allclose(lo / hi, dip, rtol=0.05)
     assert main(["irradiance", str(tmp_path / "spot.npy")]) == 0
     assert "negative irradiance" in capsys.readouterr().err
+
+
+def test_bad_cube_maps_hdr_headers_and_mip_levels_are_named(tmp_path):
+    """A cube map of N = 0 (a ZeroDivisionError), a cube face of 2 channels (a numpy stack error), an .hdr whose
+    resolution line claims more pixels than the file holds (it allocated terabytes) and a negative mip level (read
+    as level 0) are refused naming the file or the level."""
+    np.save(tmp_path / "cube0.npy", np.zeros((6, 0, 0, 3)))
+    with pytest.raises(E.EnvironmentMapError, match=r"cube0\.npy: a cube map must have shape \(6, N, N, 3\) with N"):
+        E.load_environment(tmp_path / "cube0.npy")
+    faces = tmp_path / "faces"
+    faces.mkdir()
+    for name in E.CUBE_FACE_NAMES:
+        np.save(faces / f"{name}.npy", np.ones((4, 4, 2 if name == E.CUBE_FACE_NAMES[0] else 3)))
+    with pytest.raises(E.EnvironmentMapError, match=r"\.npy: a cube face must be square, \(N, N, 1\|3\|4\)"):
+        E.load_environment(faces)
+    E.write_rgbe(tmp_path / "ok.hdr", np.full((4, 8, 3), 2.0))
+    raw = (tmp_path / "ok.hdr").read_bytes()
+    (tmp_path / "big.hdr").write_bytes(raw.replace(b"-Y 4 +X 8", b"-Y 4000000 +X 8000000"))
+    with pytest.raises(E.EnvironmentMapError, match=r"big\.hdr: truncated or wrong resolution line: 4000000 x 8000000"):
+        E.read_rgbe(tmp_path / "big.hdr")
+    np.testing.assert_allclose(E.read_rgbe(tmp_path / "ok.hdr"), 2.0, rtol=1e-2)  # the good one still reads
+    env = E.procedural("sky", resolution=8)
+    with pytest.raises(E.EnvironmentMapError, match=r"mip level -2: a whole number >= 0"):
+        env.mip(-2)
+    assert env.mip(0) is env

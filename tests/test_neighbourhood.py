@@ -190,3 +190,29 @@ def test_cli_bake_neighbourhood_and_render_receiver(tmp_path, gl, capsys):
         N.open_neighbourhood(tmp_path / "s.toml")
     grid = grid_points([0, 0, 0], [1, 2, 3], (2, 3, 4))
     assert np.allclose(grid[-1, -1, -1], [1, 2, 3]) and np.allclose(grid[0, 1, 0], [0, 1, 0])
+
+
+def test_a_flat_box_and_a_non_finite_point_stay_outside_the_arithmetic():
+    """A flat object with margin 0 gets a box of 1e-3 of its extent along the flat axis (N-4 divided 0 by 0 there
+    and indexed with the minimum int64); a NaN receiver point is outside the grid and gets 0, as any outside one."""
+    from lodprt.precompute.neighbourhood import neighbourhood_box
+
+    plane = np.array([[-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2.0]])
+    lo, hi = neighbourhood_box(plane, 0.0)
+    np.testing.assert_allclose(hi - lo, [4, 4e-3, 4])
+    np.testing.assert_allclose((lo + hi) / 2, [0, 0, 0], atol=1e-12)
+    values = np.arange(27.0).reshape(3, 3, 3)
+    out, inside = N.interpolate(values, lo, hi, [[0, 0, 0], [np.nan, 0, 0], [0, np.inf, 0]])
+    assert inside.tolist() == [True, False, False] and out[0] == values[1, 1, 1] and out[1] == out[2] == 0
+
+
+def test_an_ambiguous_object_name_is_refused():
+    """Two objects named alike: --object NAME names the clash (it baked the first one without a word)."""
+    from lodprt.precompute.neighbourhood import object_mesh
+
+    tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    mat = Material(kd=(0.5, 0.5, 0.5), ks=0.0, shininess=1.0)
+    scene = assemble_scene([("ball", tet, faces, mat), ("ball", tet + 3, faces, mat)], None, {}, "lights", "dup")
+    with pytest.raises(LodprtError, match="--object 'ball': 2 objects have that name"):
+        object_mesh(scene, "ball")

@@ -261,3 +261,28 @@ def test_sample_grid_matches_an_independent_trilinear():
     lo, hi = np.array([-1.0, 0.0, 2.0]), np.array([1.0, 0.6, 3.0])
     points = rng.uniform(lo - 0.2, hi + 0.2, (500, 3))
     np.testing.assert_allclose(sample_grid(values, lo, hi, points), trilinear(values, lo, hi, points), atol=1e-12)
+
+
+def test_volume_inputs_and_picture_options_are_checked(tmp_path, capsys):
+    """albedo 'red' (a ValueError) or true (read as 1) is refused; cloud:400 is refused before it is built (it took
+    40 s and then failed on its voxel count); render-volume refuses --white 0 or nan, --fov 0, a negative
+    --background and --rotate nan naming the option, before the store is read."""
+    from lodprt.model.volume import check_albedo
+
+    for bad in ("red", True, [0.1, "x", 0.2]):
+        with pytest.raises(LodprtError, match="albedo must be one number or three"):
+            check_albedo(bad, "p.toml")
+    np.testing.assert_array_equal(check_albedo(0.5, "p"), [0.5, 0.5, 0.5])
+    with pytest.raises(LodprtError, match=r"cloud:400: 32,000,000 voxels, more than the 16,777,216 .* \(N up to 322\)"):
+        procedural_volume("cloud:400")
+    missing = str(tmp_path / "none.zarr")
+    for opts, msg in ((["--white", "0"], "--white 0: must be a positive radiance"),
+                      (["--fov", "0"], "--fov 0: must lie strictly between 0 and 180"),
+                      (["--background", "-1", "0", "0"], "--background -1 0 0: must be >= 0"),
+                      (["--white", "nan"], "argument --white: 'nan' is not a finite number"),
+                      (["--rotate", "nan"], "argument --rotate: 'nan' is not a finite number")):
+        try:
+            code = main(["render-volume", missing, "--eye", "0", "0.5", "3", "-o", str(tmp_path / "v.png"), *opts])
+        except SystemExit as stop:  # argparse's own refusal
+            code = stop.code
+        assert code == 2 and msg in capsys.readouterr().err, opts

@@ -7,6 +7,7 @@ flag means the same thing, with the same default and help, wherever it appears.
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from lodprt.errors import LodprtError
@@ -16,6 +17,15 @@ FOV = 40.0
 SIZE = (800, 600)
 """Default image (or screen) size in pixels, width and height."""
 XYZ = ("X", "Y", "Z")
+
+
+def finite(text: str) -> float:
+    """argparse type: a finite number; nan and inf are refused naming the option (they surfaced deep inside, as a
+    black picture or a traceback)."""
+    value = float(text)  # ValueError: argparse says "invalid finite value"
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
 
 
 def add_store(p: argparse.ArgumentParser) -> None:
@@ -73,13 +83,13 @@ def add_sample(p, *, required: bool = False) -> None:
 
 def add_eye(p: argparse.ArgumentParser, *, required: bool = True) -> None:
     """``--eye X Y Z`` (when not required, the default is a three-quarter view of the scene)."""
-    p.add_argument("--eye", type=float, nargs=3, required=required, default=None, metavar=XYZ,
+    p.add_argument("--eye", type=finite, nargs=3, required=required, default=None, metavar=XYZ,
                    help="eye position" + ("" if required else " (default: a three-quarter view of the scene)"))
 
 
 def add_screen(p: argparse.ArgumentParser, *, size=SIZE, size_what: str = "image size in pixels") -> None:
     """``--fov`` and ``--size W H``."""
-    p.add_argument("--fov", type=float, default=FOV, metavar="DEG",
+    p.add_argument("--fov", type=finite, default=FOV, metavar="DEG",
                    help=f"vertical field of view in degrees (default {FOV:g})")
     p.add_argument("--size", type=int, nargs=2, default=tuple(size), metavar=("W", "H"),
                    help=f"{size_what} (default {size[0]} {size[1]})")
@@ -89,9 +99,9 @@ def add_camera(p: argparse.ArgumentParser, *, eye_required: bool = True, up: boo
                size_what: str = "image size in pixels") -> None:
     """The camera: ``--eye``, ``--target``, optionally ``--up``, then ``--fov`` and ``--size``."""
     add_eye(p, required=eye_required)
-    p.add_argument("--target", type=float, nargs=3, default=None, metavar=XYZ, help="look-at point (default: scene centre)")
+    p.add_argument("--target", type=finite, nargs=3, default=None, metavar=XYZ, help="look-at point (default: scene centre)")
     if up:
-        p.add_argument("--up", type=float, nargs=3, default=(0.0, 1.0, 0.0), metavar=XYZ, help="up direction (default +y)")
+        p.add_argument("--up", type=finite, nargs=3, default=(0.0, 1.0, 0.0), metavar=XYZ, help="up direction (default +y)")
     add_screen(p, size=size, size_what=size_what)
 
 
@@ -178,6 +188,17 @@ def check_tone(white, exposure) -> None:
     from lodprt.runtime.frames import tone_scale
 
     tone_scale(1.0 if white is None else white, exposure, "--")
+
+
+def check_picture(fov: float, white: float | None, background=(0.0, 0.0, 0.0)) -> None:
+    """Refuse, before any work, a ``--fov`` outside (0, 180) degrees, a ``--white`` (None: the default) that is
+    not > 0 and a ``--background`` under 0 (they drew black or saturated pictures without a word)."""
+    if not 0.0 < fov < 180.0:
+        raise LodprtError(f"--fov {fov:g}: must lie strictly between 0 and 180 degrees")
+    if white is not None and not white > 0:
+        raise LodprtError(f"--white {white:g}: must be a positive radiance (the one shown as white)")
+    if min(background) < 0:
+        raise LodprtError(f"--background {' '.join(f'{b:g}' for b in background)}: must be >= 0 (linear radiance)")
 
 
 def at_least(flag: str, value, low: int, note: str = "") -> None:

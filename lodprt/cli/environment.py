@@ -104,16 +104,16 @@ def _add_render_environment(sub) -> None:
     )
     cli_args.add_store(re)
     re.add_argument("--environment", default=None, metavar="ENV", help="lighting (default: the one stored by the bake); " + ENV_HELP)
-    re.add_argument("--rotate", type=float, default=0.0, metavar="DEG", help="turn the environment about +y by DEG degrees")
+    re.add_argument("--rotate", type=cli_args.finite, default=0.0, metavar="DEG", help="turn the environment about +y by DEG degrees")
     re.add_argument("--frames", type=int, default=1, metavar="N",
                     help="N > 1: N images turning the environment by 360/N degrees each, OUT_0000.png ... (default 1)")
     cli_args.add_camera(re)
-    re.add_argument("--white", type=float, default=None, metavar="L", help="radiance shown as white (default: 99th percentile of the first frame)")
+    re.add_argument("--white", type=cli_args.finite, default=None, metavar="L", help="radiance shown as white (default: 99th percentile of the first frame)")
     _add_window(re, "the lighting (chosen once: a band window commutes with --rotate)")
     re.add_argument("--receiver", default=None, metavar="MESH",
                     help="with a neighbourhood store (lodprt bake-neighbourhood): also draw this mesh (or scene file), "
                     "lit by the object's transferred lighting: its shadow and reflected light (docs/VOLUMES.md)")
-    re.add_argument("--at", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=cli_args.XYZ,
+    re.add_argument("--at", type=cli_args.finite, nargs=3, default=(0.0, 0.0, 0.0), metavar=cli_args.XYZ,
                     help="move the --receiver by X Y Z (default 0 0 0)")
     cli_args.add_output(re, "img.png", "output PNG")
     re.set_defaults(handler=cmd_render_environment)
@@ -124,7 +124,7 @@ def cmd_irradiance(args) -> int:
     from lodprt.model.environment import load_environment
 
     env = load_environment(args.environment)
-    if args.mip:
+    if args.mip is not None:
         env = env.mip(args.mip)
     from lodprt.model.windowing import apply_window, choose_window
 
@@ -224,6 +224,7 @@ def render_environment(store_path, out, *, eye, environment: str | None = None, 
                        overwrite: bool = False, window: str = "none", window_width: float | None = None,
                        receiver=None, at=(0.0, 0.0, 0.0)) -> int:
     """``lodprt render-environment`` with these values: relight, draw and write the PNG(s), report, exit code 0."""
+    cli_args.check_picture(fov, white)
     import numpy as np
 
     from lodprt.display.environment_render import open_relit, save_png

@@ -40,18 +40,18 @@ def _add_bake_volume(sub) -> None:
     )
     bv.add_argument("volume", metavar="VOLUME", help=VOLUME_HELP)
     cli_args.add_store_output(bv, "volume")
-    bv.add_argument("--bounds", type=float, nargs=6, default=None, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
+    bv.add_argument("--bounds", type=cli_args.finite, nargs=6, default=None, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
                     help="box of a .npy grid (overrides a description's bounds)")
-    bv.add_argument("--albedo", type=float, nargs="+", default=None, metavar="A",
+    bv.add_argument("--albedo", type=cli_args.finite, nargs="+", default=None, metavar="A",
                     help="single-scattering albedo, one value or R G B in [0, 1] (default 0.9 or the description's)")
-    bv.add_argument("--density-scale", type=float, default=None, metavar="S", help="multiply the density by S (default 1)")
+    bv.add_argument("--density-scale", type=cli_args.finite, default=None, metavar="S", help="multiply the density by S (default 1)")
     bv.add_argument("--sh-order", type=int, default=SH_ORDER, metavar="N", help=f"SH bands (default {SH_ORDER})")
     bv.add_argument("--rays", type=int, default=VOLUME_RAYS, metavar="R", help=f"directions per voxel (default {VOLUME_RAYS})")
     bv.add_argument("--bounces", type=int, default=VOLUME_BOUNCES, metavar="B",
                     help=f"most scattering passes after the shadowed one (default {VOLUME_BOUNCES})")
     bv.add_argument("--bounce-threshold", type=float, default=1e-3, metavar="T",
                     help="stop when a pass' energy is below T times the shadowed pass' (default 0.001)")
-    bv.add_argument("--step", type=float, default=None, metavar="H",
+    bv.add_argument("--step", type=cli_args.finite, default=None, metavar="H",
                     help="largest ray-march step in scene units (default half the smallest voxel edge)")
     bv.add_argument("--rotate-rays", action="store_true", help="turn the shadowed pass' ray set per voxel at random")
     bv.add_argument("--environment", default=None, metavar="ENV", help="store this lighting as the default; " + ENV_HELP)
@@ -69,12 +69,12 @@ def _add_render_volume(sub) -> None:
     )
     cli_args.add_store(rv)
     rv.add_argument("--environment", default=None, metavar="ENV", help="lighting (default: the bake's own); " + ENV_HELP)
-    rv.add_argument("--rotate", type=float, default=0.0, metavar="DEG", help="turn the environment about +y by DEG degrees")
+    rv.add_argument("--rotate", type=cli_args.finite, default=0.0, metavar="DEG", help="turn the environment about +y by DEG degrees")
     cli_args.add_camera(rv)
-    rv.add_argument("--step", type=float, default=None, metavar="H", help="largest march step (default: the bake's)")
-    rv.add_argument("--white", type=float, default=None, metavar="L",
+    rv.add_argument("--step", type=cli_args.finite, default=None, metavar="H", help="largest march step (default: the bake's)")
+    rv.add_argument("--white", type=cli_args.finite, default=None, metavar="L",
                     help="radiance shown as white (default: 99th percentile of the covered pixels)")
-    rv.add_argument("--background", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "G", "B"),
+    rv.add_argument("--background", type=cli_args.finite, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "G", "B"),
                     help="linear radiance behind the medium (default black)")
     cli_args.add_output(rv, "img.png", "output PNG")
     rv.set_defaults(handler=cmd_render_volume)
@@ -141,6 +141,7 @@ def cmd_render_volume(args) -> int:
     from lodprt.runtime.environment_relight import rotated_lighting
     from lodprt.runtime.volume_relight import open_volume
 
+    cli_args.check_picture(args.fov, args.white, args.background)
     out = cli_args.new_output(args.out, ".png", args.overwrite)
     store = open_volume(args.store)
     lighting = rotated_lighting(stored_or_given_lighting(store, args.store, args.environment), args.rotate)

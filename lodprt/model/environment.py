@@ -81,6 +81,8 @@ class Environment:
     def mip(self, level: int) -> "Environment":
         """The map downsampled ``level`` times by the solid-angle-weighted 2 x 2 box filter (I-3.2): the four
         children of a texel cover exactly its solid angle, so total power and the constant coefficient are kept."""
+        if isinstance(level, bool) or int(level) != level or level < 0:
+            raise EnvironmentMapError(f"{self.source}: mip level {level!r}: a whole number >= 0 (0: the map itself)")
         env = self
         for done in range(int(level)):
             if env.resolution < 2 or env.resolution % 2:  # named once, with how far it got (not "(mip)" per level)
@@ -434,8 +436,9 @@ def _check_latlong(data: np.ndarray, where: str) -> np.ndarray:
 
 def _check_cube(data: np.ndarray, where: str) -> np.ndarray:
     data = np.asarray(data, np.float64)
-    if data.ndim != 4 or data.shape[0] != 6 or data.shape[1] != data.shape[2] or data.shape[3] not in (1, 3, 4):
-        raise EnvironmentMapError(f"{where}: a cube map must have shape (6, N, N, 3), got {data.shape}")
+    if (data.ndim != 4 or data.shape[0] != 6 or data.shape[1] != data.shape[2] or data.shape[1] < 1
+            or data.shape[3] not in (1, 3, 4)):
+        raise EnvironmentMapError(f"{where}: a cube map must have shape (6, N, N, 3) with N >= 1, got {data.shape}")
     return _check_radiance(_channels(data, where), where)
 
 
@@ -448,8 +451,9 @@ def _load_cube_folder(folder: Path) -> Environment:
         img = np.asarray(read_image(found[0]), np.float64)
         if img.ndim == 2:
             img = img[..., None]
-        if img.ndim != 3 or img.shape[0] != img.shape[1]:
-            raise EnvironmentMapError(f"{found[0]}: a cube face must be square (N, N, 3), got {img.shape}")
+        if img.ndim != 3 or img.shape[0] != img.shape[1] or img.shape[0] < 1 or img.shape[2] not in (1, 3, 4):
+            raise EnvironmentMapError(f"{found[0]}: a cube face must be square, (N, N, 1|3|4) with N >= 1, got "
+                                      f"{img.shape}")
         faces.append(_channels(img, str(found[0])))
         shapes.append((found[0].name, img.shape[0]))
     sizes = {n for _, n in shapes}
@@ -522,6 +526,12 @@ def read_rgbe(path: str | os.PathLike) -> np.ndarray:
     except ValueError:
         raise EnvironmentMapError(f"{path}: resolution line {raw[pos:end]!r} is not '-Y H +X W'") from None
     data = np.frombuffer(raw, np.uint8, offset=end + 1)
+    # the fewest bytes H x W pixels take: per scanline a 4-byte header and, per channel, one 2-byte run per 127
+    # pixels (the densest run-length coding); a header claiming more than the file holds is refused before
+    # anything is allocated (it asked for terabytes)
+    if h < 1 or w < 1 or len(data) < h * (4 + 8 * -(-w // 127)):
+        raise EnvironmentMapError(f"{path}: truncated or wrong resolution line: {h} x {w} pixels need more than the "
+                                  f"file's {len(data):,} bytes of pixel data")
     rgbe = np.empty((h, w, 4), np.uint8)
     p = 0
     try:

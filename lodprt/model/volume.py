@@ -126,7 +126,12 @@ def check_bounds(lo, hi, where: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_albedo(albedo, where: str) -> np.ndarray:
-    a = np.broadcast_to(np.asarray(albedo, np.float64).reshape(-1), (3,)).copy() if np.size(albedo) in (1, 3) else None
+    try:  # numbers only: a string or a bool (true read as 1) is refused below
+        numbers = np.asarray(albedo)
+        ok = numbers.dtype.kind in "iuf" and numbers.size in (1, 3)
+        a = np.broadcast_to(numbers.astype(np.float64).reshape(-1), (3,)).copy() if ok else None
+    except (TypeError, ValueError):
+        a = None
     if a is None or not np.isfinite(a).all() or (a < 0).any() or (a > 1).any():
         raise VolumeError(f"{where}: albedo must be one number or three (RGB) in [0, 1], got {albedo!r}")
     return a
@@ -166,8 +171,10 @@ def procedural_volume(spec: str, *, albedo=0.9, density_scale: float = 1.0) -> V
         n = int(res) if res else CLOUD_RESOLUTION
     except ValueError:
         raise VolumeError(f"{spec}: the resolution after ':' must be an integer") from None
-    if n > 512:
-        raise VolumeError(f"{spec}: resolution {n} is above 512")
+    voxels = n * max(2, n // 2) * n  # cloud_density's (N, N/2, N), checked before it is built
+    if voxels > MAX_VOXELS:
+        top = max(k for k in range(4, 1024) if k * max(2, k // 2) * k <= MAX_VOXELS)
+        raise VolumeError(f"{spec}: {voxels:,} voxels, more than the {MAX_VOXELS:,} a bake handles (N up to {top})")
     return Volume(cloud_density(n) * float(density_scale), np.array([-1.0, -0.5, -1.0]), np.array([1.0, 0.5, 1.0]),
                   albedo, f"procedural {spec}")
 

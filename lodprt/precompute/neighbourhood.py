@@ -38,6 +38,9 @@ def object_mesh(scene, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     if name not in scene.object_names:
         raise LodprtError(f"{scene.source}: --object {name!r}: no such object; the scene has "
                           f"{', '.join(repr(n) for n in scene.object_names)}")
+    if scene.object_names.count(name) > 1:
+        raise LodprtError(f"{scene.source}: --object {name!r}: {scene.object_names.count(name)} objects have that "
+                          "name; give them distinct 'name' keys in the scene file")
     k = scene.object_names.index(name)
     keep = scene.object_id == k
     faces = scene.faces[keep[scene.faces].all(axis=1)]
@@ -56,8 +59,14 @@ def neighbourhood_box(positions, margin: float) -> tuple[np.ndarray, np.ndarray]
         raise LodprtError(f"--margin {margin!r}: must be a finite number >= 0")
     p = np.asarray(positions, np.float64)
     lo, hi = p.min(0), p.max(0)
-    reach = margin * float((hi - lo).max())
-    return lo - reach, hi + reach
+    extent = float((hi - lo).max())
+    reach = margin * extent
+    lo, hi = lo - reach, hi + reach
+    # N-4 interpolates (p - lo) / (hi - lo): an axis the box is flat along (a flat object, margin 0) gets a
+    # thickness of 1e-3 of the largest extent, centred on the object
+    flat = hi - lo < 1e-3 * extent
+    pad = np.where(flat, 0.5e-3 * extent, 0.0)
+    return lo - pad, hi + pad
 
 
 def grid_points(lo, hi, shape) -> np.ndarray:

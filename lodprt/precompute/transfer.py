@@ -401,6 +401,9 @@ def bake_transfer(scene, out, *, sh_order: int = 3, mode: str = "interreflected"
     store; the rest are completed on reading (T-15).
     """
     device = resolve_device(device)
+    g = glossy_order
+    if g is not None and (isinstance(g, bool) or int(g) != g or not 1 <= g <= 8):  # before any work, glossy or not
+        raise LodprtError(f"glossy order {g!r}: the transfer kernels offer orders 1..8")
     if out is not None:
         prepare_transfer_destination(out, overwrite=overwrite)
     t_load = load_kernels(device, *transfer_kernels())
@@ -410,7 +413,7 @@ def bake_transfer(scene, out, *, sh_order: int = 3, mode: str = "interreflected"
                                rotate=rotate, seed=seed, progress=progress, jobs=jobs)
     ks = np.array([m.ks for m in scene.materials])
     gids = np.nonzero(geom.referenced & (ks[scene.material_id] > 0))[0].astype(np.int32) if glossy else np.zeros(0, np.int32)
-    gorder = glossy_order or sh_order
+    gorder = sh_order if glossy_order is None else glossy_order  # 0 is refused by glossy_transfer, not replaced
     cut_nodes = None
     hierarchy_seconds = None
     gkept = gids  # the glossy vertices whose matrices are baked and stored

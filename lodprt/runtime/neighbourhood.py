@@ -45,9 +45,10 @@ def interpolate(values, lo, hi, points) -> tuple[np.ndarray, np.ndarray]:
     p = np.asarray(points, np.float64).reshape(-1, 3)
     shape = np.array(v.shape[:3])
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    u = (p - lo) / (hi - lo) * (shape - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a non-finite point is outside (NaN compares False)
+        u = (p - lo) / (hi - lo) * (shape - 1)
     inside = np.all((u >= 0) & (u <= shape - 1), axis=1)
-    u = np.clip(u, 0, shape - 1)
+    u = np.where(np.isfinite(u), np.clip(u, 0, shape - 1), 0.0)
     i0 = np.minimum(np.floor(u).astype(np.int64), shape - 2)
     f = u - i0
     out = np.zeros((len(p),) + v.shape[3:])
