@@ -245,3 +245,25 @@ def test_add_samples_refuses_a_grid_without_the_old_samples(tmp_path):
         api_bake(scene_file(tmp_path, grid=(4, 1, 1), box=box, name="b.toml"), tmp_path / "none.zarr",
                  add_samples=True)
     assert files(out) == before and sorted(p.name for p in tmp_path.iterdir()) == ["a.toml", "b.toml", "s.zarr"]
+
+
+def test_resume_with_compress_encodes_a_finished_float32_store(tmp_path):
+    """bake --compress killed while re-encoding leaves the finished float32 store; the same bake with --resume now
+    encodes it (it reported success and left it float32); resumed again it is finished; another codec is refused
+    naming both, and --add-samples refuses an encoded store naming its codec (it blamed format_version)."""
+    from lodprt.store.bake_store import open_store
+
+    toml = scene_file(tmp_path, grid=(2, 1, 1))
+    out = tmp_path / "out.zarr"
+    api_bake(toml, out)
+    assert open_store(out).codec == "none"
+    api_bake(toml, out, resume=True, compress="q8")
+    assert open_store(out).codec == "q8"
+    before = files(out)
+    api_bake(toml, out, resume=True, compress="q8")  # finished and encoded: nothing written
+    assert files(out) == before
+    with pytest.raises(LodprtError, match="holds this bake encoded with codec q8, not q10"):
+        api_bake(toml, out, resume=True, compress="q10")
+    with pytest.raises(LodprtError, match="is encoded with codec q8; --add-samples extends a float32 store"):
+        api_bake(scene_file(tmp_path, grid=(6, 1, 1), name="more.toml"), out, add_samples=True)
+    assert files(out) == before

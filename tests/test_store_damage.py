@@ -142,3 +142,40 @@ def test_a_hierarchy_with_a_broken_link_is_refused_naming_store_and_node(tmp_pat
     with pytest.raises(StoreError, match=rf"out\.zarr: hierarchy/: hierarchy arrays inconsistent: node {root} has "
                                          r"parent"):
         open_store(out).hierarchy()
+
+
+def test_a_lost_sample_group_or_attribute_is_named(spot_scene, tmp_path, capsys):
+    """A sample group deleted, a sample's statistics or the lights' intensity attribute removed: info, compress,
+    radiance and export say which group or attribute is gone (they raised KeyError), and bake --resume or
+    --add-samples call the store damaged, leaving no partial folder behind (one blocked the next bake)."""
+    store = tmp_path / "s.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(store), *FAST]) == 0
+    lost = tmp_path / "lost.zarr"
+    lost.mkdir()
+    for name, data in snapshot(store).items():  # a copy with samples/00001 gone
+        if not name.startswith("samples/00001"):
+            (lost / name).parent.mkdir(parents=True, exist_ok=True)
+            (lost / name).write_bytes(data)
+    capsys.readouterr()
+    for argv in (["info", str(lost)], ["compress", str(lost), "-o", str(tmp_path / "c.zarr"), "--codec", "f16"],
+                 ["radiance", str(lost), "--sample", "1", "--eye", "0", "1", "3", "-o", str(tmp_path / "r.npy")]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert "samples/00001" in err and "is missing" in err and len(err.strip().splitlines()) == 1, (argv, err)
+    bigger = spot_scene.with_name("bigger.toml")
+    bigger.write_text(spot_scene.read_text().replace("grid = [2, 1, 1]", "grid = [6, 1, 1]"))
+    for argv in (["bake", str(spot_scene), "-o", str(lost), "--resume", *FAST],
+                 ["bake", str(bigger), "-o", str(lost), "--add-samples", *FAST]):
+        assert main(argv) == 2, argv
+        assert "samples/00001 missing or incomplete: the store is damaged" in capsys.readouterr().err, argv
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("lost")) == ["lost.zarr"]
+    for group, key in (("samples/00000", "vertices_kept"), ("lights", "intensity")):
+        meta = store / group / "zarr.json"
+        doc = json.loads(meta.read_text())
+        del doc["attributes"][key]
+        meta.write_text(json.dumps(doc))
+        argv = ["info", str(store)] if key == "vertices_kept" else \
+            ["radiance", str(store), "--sample", "0", "--eye", "0", "1", "3", "-o", str(tmp_path / "q.npy")]
+        assert main(argv) == 2
+        want = "attribute(s) vertices_kept missing" if key == "vertices_kept" else "lights: attribute intensity missing"
+        assert want in capsys.readouterr().err

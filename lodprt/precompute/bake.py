@@ -226,8 +226,8 @@ def bake(
         settings = bake_settings(scene, sh_order, device, threshold_deg, hierarchy, gi)
         target = BakeTarget(out, overwrite=overwrite, resume=resume, add_samples=add_samples, settings=settings,
                             lights=scene.lights)
-        if target.finished is not None:  # nothing left to bake
-            return BakeResult(**target.summary())
+        if target.finished is not None:  # nothing left to bake; encoded as asked, or now
+            return BakeResult(**finished_as_asked(target, out, codec))
     try:
         # plan: kernels, the scene and the hierarchy (each skipped when a resumed store has it complete)
         load_seconds = 0.0 if cluster else load_kernels(device, *bake_kernels())
@@ -310,6 +310,23 @@ def bake_codec(compress: str, ncoef: int, channels: int, out):
     if out is None and not codec.lossless:
         raise LodprtError(f"compress {codec.name}: needs a store to write (out)")
     return codec
+
+
+def finished_as_asked(target, out, codec) -> dict:
+    """``BakeResult``'s fields of a store that already holds the bake (``target.finished``): encoded with
+    ``codec`` now when it is still float32 (a bake --compress killed while re-encoding, then resumed); refused when
+    it is encoded with another codec."""
+    from lodprt.store.sample_groups import group_attrs
+
+    have = str((group_attrs(target.finished) or {}).get("codec", "none"))
+    summary = target.summary()
+    if have == codec.name or (have == "none" and codec.lossless):
+        return summary
+    if have != "none":
+        raise LodprtError(f"{out}: holds this bake encoded with codec {have}, not {codec.name}: re-encode it with "
+                          f"lodprt compress {out} -o OUT --codec {codec.name}")
+    summary["samples"] = compress_finished(out, codec, summary["samples"])
+    return summary
 
 
 def compress_finished(out, codec, samples: list[dict]) -> list[dict]:

@@ -17,6 +17,8 @@ from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_
 log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 1
+#: the attributes every sample group records that the readers need (``Store.sample_info`` checks them)
+SAMPLE_ATTRS = ("vertices_kept", "bytes")
 #: versions ``Store`` reads: 1 (float32 samples) and 2 (samples encoded by a codec, ``lodprt.store.codecs``)
 READ_VERSIONS = (1, 2)
 
@@ -106,7 +108,7 @@ class Store:
         """SH coefficients stored per vertex and channel, read off the arrays: 1 (diffuse-only) or sh_order^2."""
         if self.codec != "none":
             return int(self.attrs["coefficients_per_vertex"])
-        return int(self.root[f"{sample_group(0)}/coefficients"].shape[-1])
+        return int(self.group(0)["coefficients"].shape[-1])
 
     @property
     def light_positions(self) -> np.ndarray:
@@ -125,7 +127,10 @@ class Store:
     @property
     def intensity(self) -> np.ndarray:
         if "lights/intensity" not in self._cache:  # read once: the run time asks every frame
-            self._cache["lights/intensity"] = np.asarray(self.root["lights"].attrs["intensity"], dtype=np.float64)
+            attrs = self.root["lights"].attrs
+            if "intensity" not in attrs:
+                raise StoreError(f"{self.path}: lights: attribute intensity missing: the store is damaged; bake it again")
+            self._cache["lights/intensity"] = np.asarray(attrs["intensity"], dtype=np.float64)
         return self._cache["lights/intensity"].copy()
 
     def check_sample(self, k: int) -> int:
@@ -153,9 +158,22 @@ class Store:
             return {"cut_nodes": self.read(f"{g}/cut_nodes", cache=False), "dark": self.read(f"{g}/dark", cache=False)}
         return {}
 
+    def group(self, k: int):
+        """Sample ``k``'s zarr group, or StoreError naming it when the store lost it."""
+        name = sample_group(self.check_sample(k))
+        try:
+            return self.root[name]
+        except KeyError:
+            raise StoreError(f"{self.path}: the group '{name}' is missing: the store is damaged; bake it again") from None
+
     def sample_info(self, k: int) -> dict:
-        g = self.root[sample_group(self.check_sample(k))]
-        return dict(g.attrs)
+        """Sample ``k``'s recorded statistics, StoreError naming any ``SAMPLE_ATTRS`` missing."""
+        a = dict(self.group(k).attrs)
+        lost = [key for key in SAMPLE_ATTRS if key not in a]
+        if lost:
+            raise StoreError(f"{self.path}: {sample_group(k)}: attribute(s) {', '.join(lost)} missing: the store is "
+                             "damaged; bake it again")
+        return a
 
     def completion_plan(self):
         """The geometry-only completion weights of this store's hierarchy (computed once, then cached)."""

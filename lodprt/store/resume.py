@@ -107,6 +107,16 @@ def link_tree(src: Path, dst: Path) -> None:
     shutil.copytree(src, dst, copy_function=link)
 
 
+def check_complete(store: Path, count: int) -> None:
+    """StoreError naming the damaged groups unless the committed ``store`` holds ``count`` complete samples."""
+    done = set(complete_samples(store, count))
+    missing = [sample_group(k) for k in range(count) if k not in done]
+    if missing:
+        more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+        raise StoreError(f"{store}: {', '.join(missing[:5])}{more} missing or incomplete: the store is damaged; bake "
+                         "it again with --overwrite")
+
+
 class BakeTarget:
     """Where one bake of ``settings`` (root attributes) and ``lights`` (``Lights``) writes (module docstring).
 
@@ -131,6 +141,7 @@ class BakeTarget:
             adopt = self._adoptable()
             if adopt is None and not add_samples and is_store(self.path):
                 self._check(self.path, f"{self.path} (resuming a finished store)", grid=True)
+                check_complete(self.path, len(self.positions))
                 self.finished = self.path
         if self.finished is not None:
             return
@@ -139,18 +150,26 @@ class BakeTarget:
                              "--add-samples too if it was extending the store, or --overwrite")
         self.writer = StoreWriter(self.path, overwrite=overwrite or add_samples, adopt=adopt)
         self.partial = self.writer.partial
-        if adopt is None:
-            self.writer.attrs(**self.settings)  # recorded first: a resumed bake checks against them
-            self.writer.root.require_group("samples")
-        else:
-            self.resumed_from = adopt
-            self._repair()
-        if self.reuse:
-            self._link_reused()
+        try:
+            if adopt is None:
+                self.writer.attrs(**self.settings)  # recorded first: a resumed bake checks against them
+                self.writer.root.require_group("samples")
+            else:
+                self.resumed_from = adopt
+                self._repair()
+            if self.reuse:
+                self._link_reused()
+        except Exception:  # e.g. a damaged store to extend: no partial folder is left to block the next bake
+            self.writer.abort()
+            raise
 
     # -- checks --------------------------------------------------------------------------------------------------
     def _check(self, folder: Path, where: str, *, grid: bool) -> None:
-        check_settings(where, group_attrs(folder), self.settings)
+        recorded = group_attrs(folder)
+        wanted = self.settings
+        if (recorded or {}).get("codec", "none") != "none":  # re-encoded by bake --compress or lodprt compress: its
+            wanted = {k: v for k, v in wanted.items() if k != "format_version"}  # codec is the bake's to check
+        check_settings(where, recorded, wanted)
         recorded = group_attrs(folder / "lights")
         if recorded is not None:  # absent in a partial killed before the scene was written: nothing depends on it
             wanted = {k: v for k, v in self.lights.items() if grid or k not in GRID_KEYS}
@@ -175,7 +194,13 @@ class BakeTarget:
         if not is_store(self.path):
             raise StoreError(f"{self.path}: --add-samples extends an existing store, and there is none; bake it first")
         self._check(self.path, f"{self.path} (the store --add-samples extends)", grid=False)
+        codec = (group_attrs(self.path) or {}).get("codec", "none")
+        if codec != "none":
+            raise StoreError(f"{self.path}: is encoded with codec {codec}; --add-samples extends a float32 store: "
+                             "bake the new grid afresh, or decode this one first (lodprt compress IN -o OUT "
+                             "--codec none) and extend that")
         old = open_store(self.path).light_positions.astype(np.float32)
+        check_complete(self.path, len(old))
         box = np.asarray(self.lights["box"], np.float64)
         tol = SAME_POSITION * max(float(np.linalg.norm(box[3:] - box[:3])), float(np.abs(box).max()), 1e-30)
         exact = {p.tobytes(): k for k, p in enumerate(self.positions)}
