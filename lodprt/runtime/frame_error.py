@@ -8,8 +8,9 @@ per-node bound toward a stated PSNR in motion, and the refinement of a still fra
           the frame relit them), their positions, normals and coefficients interpolated at the hit and evaluated
           toward the eye, as the renderer draws a fragment (``kernels.runtime.hit_radiance``)
     E-2   the rays: one per pixel (the first frame, a still one) or per square cell of about COVERAGE_RAYS cells
-          (in motion), halved while fewer than MIN_COVERED of them are covered (``screen_hits``, ``kernels.runtime.first_hits`` on the full mesh's BVH, ``reference``, and
-          on a BVH of the cut's mesh); covered: either mesh non-black there
+          (in motion), halved while fewer than MIN_COVERED of them are covered (``screen_hits``,
+          ``kernels.runtime.first_hits`` on the full mesh's BVH, ``reference``, and on a BVH of the cut's mesh);
+          covered: either mesh non-black there
     E-3   PSNR_est = -10 log10(MSE)                         (display units of white, as ``error_numbers``)
     E-4   the bound b for the next frames: the largest bound whose cut's E-3 meets the target, searched by
           bisection in log b between the largest bound that met it and the smallest that missed (``Steering``);
