@@ -413,7 +413,7 @@ def bake_transfer(scene, out, *, sh_order: int = 3, mode: str = "interreflected"
                                rotate=rotate, seed=seed, progress=progress, jobs=jobs)
     ks = np.array([m.ks for m in scene.materials])
     gids = np.nonzero(geom.referenced & (ks[scene.material_id] > 0))[0].astype(np.int32) if glossy else np.zeros(0, np.int32)
-    gorder = sh_order if glossy_order is None else glossy_order  # 0 is refused by glossy_transfer, not replaced
+    gorder = sh_order if glossy_order is None else glossy_order  # a 0 was refused above, not replaced
     cut_nodes = None
     hierarchy_seconds = None
     gkept = gids  # the glossy vertices whose matrices are baked and stored
