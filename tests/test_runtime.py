@@ -430,14 +430,16 @@ def test_stiff_cameras_stay_finite_and_legal(store, cam):
 
 
 def test_triangle_budget_steers_the_count(store):
-    """With a triangle budget the count settles at or under the budget within a few frames."""
-    r = Runtime(store, error_bound=0.01, triangle_budget=3000)
+    """With a triangle budget the count settles at or under the budget within a few frames. (4,000: B-1 raises the
+    bound up to the steering's highest, 8, whose cut here keeps about 3,005 triangles: a budget of 3,000 is missed
+    by that margin, docs/RUNTIME.md B-1.)"""
+    r = Runtime(store, error_bound=0.01, triangle_budget=4000)
     cam = orbit_camera(r, 0.2)
     counts = []
-    for _ in range(60):  # coarsening from ~32k triangles runs a few hundred collapses a frame
+    for _ in range(60):  # coarsening from ~46k triangles runs a few hundred collapses a frame
         r.set_camera(cam)
         counts.append(r.update().stats["triangles"])
-    assert counts[0] > 3000 and counts[-1] <= 3000
+    assert counts[0] > 4000 and counts[-1] <= 4000 and r.error_bound < 8
 
 
 def test_bad_settings_are_refused(store, rt):

@@ -2,8 +2,9 @@
 (B-1) and a frame-time budget (B-2), after each frame.
 
     B-1   triangle budget T: bound x1.25 when the frame had more than T triangles (up to the steering's highest
-          bound: a budget under the coarsest cut's triangles holds the bound there, never past it), / 1.1 when
-          under 0.8 T, else kept (the bound is steered toward the budget; the target_psnr's steering, E-4, is off)
+          bound, 8, as B-2's floor: a budget under the triangles of that bound's cut holds the bound there and is
+          missed by that margin; it used to grow without end, to inf), / 1.1 when under 0.8 T, else kept (the
+          bound is steered toward the budget; the target_psnr's steering, E-4, is off)
     B-2   frame-time budget F ms (Hoppe 1997's regulation of the frame rate, on the bound): after a frame in motion
           that made no estimate (E-1) and no pins (E-5), m = the mean of its time and the last such frame's; over F,
           the floor becomes 1.25 max(floor, bound), at most the steering's highest bound; under 0.8 F, floor / 1.1
