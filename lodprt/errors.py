@@ -1,4 +1,8 @@
-"""Errors lodprt raises for bad input (each names the file and the field it is about), a full disk, and Ctrl-C."""
+"""Errors lodprt raises for bad input (each names the file and the field it is about), a full disk, and Ctrl-C; and
+the whole-number test that the settings' checks share."""
+
+import math
+import numbers
 
 
 class LodprtError(Exception):
@@ -20,3 +24,15 @@ class DiskFull(StoreError):
 
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C (SIGINT) stopped a bake; the message says what it left (the CLI prints it in one line, exit 130)."""
+
+
+def is_whole(value, low: float = -math.inf, high: float = math.inf, *, integer_type: bool = False) -> bool:
+    """Whether ``value`` is a whole number in [low, high], as the settings' checks ask before they name a bad one:
+    a bool never is, nor a string or a non-finite float; 3.0 is 3 unless ``integer_type`` asks for an int type
+    (numpy's included)."""
+    kinds = numbers.Integral if integer_type else numbers.Real
+    if isinstance(value, bool) or not isinstance(value, kinds):
+        return False
+    if not isinstance(value, numbers.Integral) and not (math.isfinite(value) and int(value) == value):
+        return False
+    return low <= value <= high

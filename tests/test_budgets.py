@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from lodprt.errors import LodprtError
-from lodprt.runtime.budgets import DOWN, UP, FrameBudgets, toward_budget
+from lodprt.runtime.budgets import CEILING, DOWN, UP, FrameBudgets, toward_budget
 from lodprt.runtime.settings import check_frame_ms
 from lodprt.runtime.camera import camera_path
 from lodprt.runtime.frame_error import BOUND_RANGE
@@ -40,14 +40,61 @@ def test_triangle_budget_under_the_coarsest_cut_holds_the_bound_at_the_top():
     assert toward_budget(20.0, 10**6, 1, low, high) == 20.0
 
 
+def test_past_the_top_only_on_settled_frames_while_raises_remove_triangles():
+    """B-1 past the steering's highest bound, step by step against the law: on settled frames only, x1.25 after a
+    raise that took triangles off, a squared step after one that took none, up to CEILING; then back to the last
+    bound that took triangles off, held there over the budget; a frame under 0.8 of it brings the bound down."""
+    low, high = BOUND_RANGE
+    b = FrameBudgets(triangles=3000, lowest=low, highest=high)
+    after = lambda bound, tri, settled=True: b.after_frame(bound, tri, 1.0, timed=False, settled=settled)
+    assert after(high, 5000, settled=False) == high  # the cut still moves: held at the top
+    assert after(high, 5000) == pytest.approx(high * UP)  # settled, no raise yet: a first try past it
+    assert after(high * UP, 4000) == pytest.approx(high * UP**2)  # the try took 1,000 off: on, x1.25
+    assert after(high * UP**2, 4000) == pytest.approx(high * UP**4)  # took none off: the step squared
+    assert after(high * UP**4, 3900) == pytest.approx(high * UP**5)  # took some off: x1.25 again
+    bound = high * UP**5
+    while bound < CEILING:  # the coarsest cut: every raise up to CEILING takes none off
+        nxt = after(bound, 3900)
+        assert bound < nxt <= CEILING
+        bound = nxt
+    assert after(bound, 3900) == pytest.approx(high * UP**4)  # back to the last bound that took some off
+    assert after(high * UP**4, 3900) == pytest.approx(high * UP**4)  # and held there
+    assert after(high * UP**4, 2000) == pytest.approx(high * UP**4 / DOWN)  # under 0.8 x 3,000: down
+    assert after(high * UP**4 / DOWN, 3500) == pytest.approx(high * UP**5 / DOWN)  # the search may start again
+
+
+def _settled_triangles(store, bound: float) -> int:
+    """The triangles of the cut at a fixed ``bound`` (no target) once it made no move, at the tests' still view."""
+    rt = Runtime(store, device="cpu", error_bound=bound, target_psnr=None)
+    rt.set_camera(eye=(0.3, 1.0, 1.8), width=64, height=48)
+    for _ in range(400):
+        f = rt.update()
+        if f.stats["refined"] == f.stats["coarsened"] == 0:
+            return f.stats["triangles"]
+    raise AssertionError(f"the cut at bound {bound} did not settle")
+
+
 def test_unreachable_triangle_budget_on_a_runtime(store):
-    """A Runtime with triangle_budget=1 (the coarsest cut has more) on a still camera: after 60 frames the bound
-    is the highest of the steering's range, not 0.8 x 1.25^60."""
+    """A Runtime with triangle_budget=1 (every cut has more) on a still camera: the bound ends finite (it grew
+    x1.25 a frame without end) and the cut is this view's coarsest: that of a bound no node's error reaches."""
     rt = Runtime(store, device="cpu", triangle_budget=1)
     rt.set_camera(eye=(0.3, 1.0, 1.8), width=64, height=48)
-    for _ in range(60):
-        rt.update()
-    assert rt.error_bound == BOUND_RANGE[1]
+    for _ in range(400):
+        frame = rt.update()
+    assert BOUND_RANGE[1] < rt.error_bound < CEILING
+    assert frame.stats["triangles"] == _settled_triangles(store, CEILING)
+
+
+def test_a_budget_under_the_top_bounds_cut_is_met(store):
+    """A budget between the coarsest cut and the cut of the steering's highest bound (8; it was missed by that
+    margin, held at 8): B-1 searches past 8 and the count settles at or under the budget."""
+    top, least = _settled_triangles(store, BOUND_RANGE[1]), _settled_triangles(store, CEILING)
+    assert least < top
+    budget = (top + least) // 2
+    rt = Runtime(store, device="cpu", error_bound=0.01, triangle_budget=budget)
+    rt.set_camera(eye=(0.3, 1.0, 1.8), width=64, height=48)
+    counts = [rt.update().stats["triangles"] for _ in range(400)]
+    assert counts[0] > budget and counts[-1] <= budget and rt.error_bound > BOUND_RANGE[1]
 
 
 def test_frame_time_floor_law():

@@ -214,6 +214,21 @@ def test_negative_radiance_is_refused(tmp_path):
         E.load_environment(tmp_path / "neg.npy")
 
 
+def test_radiance_that_float32_relighting_would_overflow_is_refused(tmp_path):
+    """A finite texel above RADIANCE_LIMIT (1e36; float32 ends at 3.4e38) is refused naming the file and the
+    texel: a constant map of 1e38 rendered the volume black. At the limit, the map's projection stays finite."""
+    from lodprt.model.scene import RADIANCE_LIMIT
+
+    a = np.ones((8, 16, 3))
+    a[3, 4, 2] = 1e38
+    np.save(tmp_path / "big.npy", a)
+    with pytest.raises(LodprtError, match=r"big\.npy: 1 texel value\(s\) are above 1e\+36 \(first at index \(3, 4, 2\)"):
+        E.load_environment(tmp_path / "big.npy")
+    np.save(tmp_path / "edge.npy", np.full((8, 16, 3), RADIANCE_LIMIT))
+    coeffs = E.load_environment(tmp_path / "edge.npy").project(3)
+    assert np.isfinite(coeffs.astype(np.float32)).all()
+
+
 @pytest.mark.parametrize("shape", [(8, 8, 3), (8, 16, 2), (6, 4, 5, 3), (5, 4, 4, 3)])
 def test_wrong_shapes_are_refused(tmp_path, shape):
     """Arrays that are neither (H, 2H, 3) lat-long nor (6, N, N, 3) cube maps give an error stating the expected shape."""

@@ -80,7 +80,7 @@ def test_tone_scale_range():
         tone_scale(1.0, 2000.0)
     with pytest.raises(LodprtError, match=r"2\^--exposure / --white = .* beyond float32"):
         tone_scale(1e-10, 100.0, "--")
-    with pytest.raises(LodprtError, match="white 0.0 must be > 0"):
+    with pytest.raises(LodprtError, match="white 0: must be a positive radiance"):
         tone_scale(0.0, 0.0)
 
 

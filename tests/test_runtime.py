@@ -430,9 +430,8 @@ def test_stiff_cameras_stay_finite_and_legal(store, cam):
 
 
 def test_triangle_budget_steers_the_count(store):
-    """With a triangle budget the count settles at or under the budget within a few frames. (4,000: B-1 raises the
-    bound up to the steering's highest, 8, whose cut here keeps about 3,005 triangles: a budget of 3,000 is missed
-    by that margin, docs/RUNTIME.md B-1.)"""
+    """With a triangle budget the count settles at or under the budget within a few frames, the bound under the
+    steering's highest (8; budgets past it: tests/test_budgets.py)."""
     r = Runtime(store, error_bound=0.01, triangle_budget=4000)
     cam = orbit_camera(r, 0.2)
     counts = []

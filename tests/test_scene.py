@@ -444,6 +444,34 @@ def test_obj_with_materials_and_texture_coordinates_keeps_the_files_vertices(tmp
     np.testing.assert_array_equal(faces, [[0, 2, 1], [1, 2, 3]])
 
 
+def test_obj_with_texture_coordinates_keeps_an_unreferenced_vertex(tmp_path):
+    """One group whose faces carry vt/vn, and a vertex no face uses: trimesh drops that vertex even without a
+    material split (4 of the file's 5), so the file's 'v' lines are counted for every OBJ, and it comes back."""
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 5 5 5\nvn 0 0 1\nvt 0 0\nvt 1 0\n" \
+           "f 1/1/1 2/2/1 3/1/1\nf 2/1/1 4/2/1 3/2/1\n"
+    pos, faces = load_mesh(write(tmp_path, "vt.obj", text))
+    np.testing.assert_array_equal(pos, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [5, 5, 5]])
+    np.testing.assert_array_equal(faces, [[0, 1, 2], [1, 3, 2]])
+
+
+def test_obj_vertex_index_zero_is_refused_naming_the_line(tmp_path):
+    """OBJ counts vertices from 1 (negative: back from the last), so an index 0 names no vertex: trimesh took
+    another vertex for it. A 0 elsewhere (a texture index, a coordinate, 10) is no vertex index 0."""
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1/0 2/1 3\nf -1 -2 -3\n"
+    load_mesh(write(tmp_path, "ok.obj", text))
+    for bad, line in (("f 0 2 3\n", 7), ("f 2 4 3 0\n", 7), ("f  2/1 00/1 3\n", 7)):
+        with pytest.raises(SceneError, match=rf"bad\.obj: field 'faces': line {line} uses vertex index 0"):
+            load_mesh(write(tmp_path, "bad.obj", text + bad))
+
+
+def test_empty_ply_is_called_empty_not_a_point_cloud(tmp_path):
+    """A PLY of no vertices and no faces is an empty mesh (it was called a point cloud)."""
+    head = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
+    path = write(tmp_path, "empty.ply", head + "element face 0\nproperty list uchar int vertex_indices\nend_header\n")
+    with pytest.raises(SceneError, match=r"empty\.ply: field 'faces': no faces: .* the mesh is empty"):
+        load_mesh(path)
+
+
 def test_unreferenced_vertices_size_nothing(tmp_path):
     """A vertex no face uses, 100 units under a unit triangle, moves neither the floor nor the default light box
     nor the default radius: the scene is the one without it."""

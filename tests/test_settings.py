@@ -42,3 +42,37 @@ def test_criteria_refuse_bad_settings_by_name():
         name = "thesis" if "alpha" in kwargs else "screen"
         with pytest.raises(LodprtError, match=field):
             make_criterion(name, **kwargs)
+
+
+def test_is_whole_against_the_written_out_rule():
+    """``lodprt.errors.is_whole``, which the whole-number settings share (SH orders, rays, bounces, mip levels,
+    jobs, camera sizes): an int or a float equal to one in the range, never a bool, a string, NaN or inf; with
+    ``integer_type`` no float either. Python's unbounded ints and numpy's types included."""
+    import numpy as np
+
+    from lodprt.errors import is_whole
+
+    for value in (3, 3.0, np.int64(3), np.float32(3), np.uint8(3)):
+        assert is_whole(value, 1, 8)
+    for value in (3.5, True, np.bool_(True), "3", None, math.nan, math.inf, 0, 9, [3]):
+        assert not is_whole(value, 1, 8)
+    assert is_whole(10**400) and not is_whole(10**400, high=1e300) and not is_whole(-(10**400), 0)
+    assert is_whole(3, integer_type=True) and is_whole(np.int32(3), integer_type=True)
+    assert not is_whole(3.0, integer_type=True) and not is_whole(False, integer_type=True)
+
+
+@pytest.mark.parametrize("call", ["mip", "gi", "transfer"])
+def test_a_whole_number_setting_given_a_word_is_named(call):
+    """A word where a whole number belongs is the setting's own LodprtError (``int("x")`` raised ValueError)."""
+    from lodprt.model.environment import load_environment
+    from lodprt.precompute.gi import GISettings
+
+    with pytest.raises(LodprtError, match={"mip": "mip level 'x'", "gi": "bounces 'x'", "transfer": "glossy order"}[call]):
+        if call == "mip":
+            load_environment("constant").mip("x")
+        elif call == "gi":
+            GISettings("x", 0.01, 64, None)
+        else:
+            from lodprt.precompute.transfer import check_glossy_order
+
+            check_glossy_order("x")

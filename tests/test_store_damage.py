@@ -107,8 +107,32 @@ def test_damaged_chunk_is_one_line_naming_store_array_and_info(tmp_path, spot_sc
     assert f"{out}: array 'samples/00001/coefficients' is damaged" in err
     assert ("cannot be read" if damage == "garble" else "chunk files are missing") in err
     assert f"lodprt info {out}" in err
-    assert main(["info", str(out)]) == 0  # what the message suggests works on the damaged store
+    # what the message suggests works on the damaged store, and names the damage: a missing chunk file always, a
+    # garbled one with --verify (every array read whole); status 1
+    capsys.readouterr()
+    assert main(["info", str(out)]) == (1 if damage == "delete" else 0)
+    assert main(["info", str(out), "--verify"]) == 1
+    err = capsys.readouterr().err
+    assert f"{out}: damaged: array 'samples/00001/coefficients'" in err and "bake it again" in err, err
+    assert len([ln for ln in err.splitlines() if "damaged: array" in ln]) == (2 if damage == "delete" else 1), err
     assert open_store(out).sample(0)[0].size > 0  # the other samples still read
+
+
+def test_info_verify_of_an_intact_store_and_of_a_transfer_store(tmp_path, spot_scene, capsys):
+    """An intact store: info and info --verify exit 0 and report no damage (JSON: "damage": []); a transfer store
+    with a chunk file gone: info names it and exits 1."""
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    capsys.readouterr()
+    assert main(["info", str(out), "--verify", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["damage"] == []
+    env = tmp_path / "env.zarr"
+    assert main(["bake-environment", str(spot_scene), "-o", str(env), "--rays", "16", "--sh-order", "2"]) == 0
+    chunk = next(p for p in sorted((env / "transfer").rglob("*")) if p.is_file() and p.name != "zarr.json")
+    chunk.unlink()
+    capsys.readouterr()
+    assert main(["info", str(env)]) == 1
+    assert "damaged: array 'transfer" in capsys.readouterr().err
 
 
 def test_disk_full_outside_a_store_is_one_line_naming_the_output(tmp_path, spot_scene, monkeypatch, capsys):
@@ -177,5 +201,5 @@ def test_a_lost_sample_group_or_attribute_is_named(spot_scene, tmp_path, capsys)
         argv = ["info", str(store)] if key == "vertices_kept" else \
             ["radiance", str(store), "--sample", "0", "--eye", "0", "1", "3", "-o", str(tmp_path / "q.npy")]
         assert main(argv) == 2
-        want = "attribute(s) vertices_kept missing" if key == "vertices_kept" else "lights: attribute intensity missing"
+        want = "attribute(s) vertices_kept missing" if key == "vertices_kept" else "lights: attribute(s) intensity missing"
         assert want in capsys.readouterr().err

@@ -193,10 +193,12 @@ def check_tone(white, exposure) -> None:
 def check_picture(fov: float, white: float | None, background=(0.0, 0.0, 0.0)) -> None:
     """Refuse, before any work, a ``--fov`` outside (0, 180) degrees, a ``--white`` (None: the default) that is
     not > 0 and a ``--background`` under 0 (they drew black or saturated pictures without a word)."""
+    from lodprt.runtime.frames import check_white
+
     if not 0.0 < fov < 180.0:
         raise LodprtError(f"--fov {fov:g}: must lie strictly between 0 and 180 degrees")
-    if white is not None and not white > 0:
-        raise LodprtError(f"--white {white:g}: must be a positive radiance (the one shown as white)")
+    if white is not None:
+        check_white(white, "--")
     if min(background) < 0:
         raise LodprtError(f"--background {' '.join(f'{b:g}' for b in background)}: must be >= 0 (linear radiance)")
 
@@ -210,32 +212,28 @@ def at_least(flag: str, value, low: int, note: str = "") -> None:
 def require_suffix(out, suffix: str) -> Path:
     """``out`` as the path of a file to write: refused unless it ends with ``suffix`` (e.g. ``.png``, in any case),
     its folder exists and it is not itself a folder. Checked before any work, so a bad path fails at once."""
-    out = Path(out)
-    if out.suffix.lower() != suffix.lower():
-        raise LodprtError(f"{out}: the output must be a {suffix} file")
-    if not out.parent.is_dir():
-        raise LodprtError(f"{out}: the folder {out.parent} does not exist")
-    refuse_folder(out)
-    return out
+    from lodprt.display.pictures import check_output
+
+    return check_output(out, (suffix,), overwrite=None, option="--overwrite")
 
 
 def refuse_folder(path) -> None:
     """Refuse an output ``path`` that is an existing folder: a file never replaces one, even with --overwrite."""
-    if Path(path).is_dir():
-        raise LodprtError(f"{path}: is a folder; the output must be a file (--overwrite replaces a file, never a "
-                          "folder)")
+    from lodprt.display.pictures import refuse_replacing
+
+    refuse_replacing(path, None, "--overwrite")
 
 
 def refuse_existing(path, overwrite: bool) -> None:
     """Refuse to replace an existing ``path`` without ``--overwrite``, and a folder even with it."""
-    refuse_folder(path)
-    if Path(path).exists() and not overwrite:
-        raise LodprtError(f"{path}: already exists; pass --overwrite to replace it")
+    from lodprt.display.pictures import refuse_replacing
+
+    refuse_replacing(path, overwrite, "--overwrite")
 
 
 def new_output(out, suffix: str, overwrite: bool) -> Path:
     """An output file, checked before any work: the right suffix (in any case: ``.NPY`` is a ``.npy``), an existing
     folder, not a folder itself, and not an existing file unless ``overwrite``."""
-    out = require_suffix(out, suffix)
-    refuse_existing(out, overwrite)
-    return out
+    from lodprt.display.pictures import check_output
+
+    return check_output(out, (suffix,), overwrite=overwrite, option="--overwrite")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 
 from lodprt.cli import args as cli_args
 from lodprt.errors import LodprtError
@@ -17,7 +18,10 @@ def register(sub) -> None:
 def _add_info(sub) -> None:
     i = sub.add_parser("info", help="summarise a store", description="Print what a bake store holds: mesh, SH order, hierarchy, the light box (the sampled region of --light), bake time, bytes and the light samples; of a transfer, volume or neighbourhood store, its settings and arrays.")
     cli_args.add_store(i)
-    cli_args.add_json(i, "a JSON object (vertices, sh_order, bake_seconds, light_box, samples, ...)")
+    cli_args.add_json(i, "a JSON object (vertices, sh_order, bake_seconds, light_box, samples, damage, ...)")
+    i.add_argument("--verify", action="store_true",
+                   help="read every array whole, so that a garbled chunk is found too (without it: chunk files "
+                        "missing only); a damaged store exits with status 1")
     i.set_defaults(handler=cmd_info)
 
 
@@ -48,11 +52,11 @@ def cmd_info(args) -> int:
 
     other = other_store(args.store)
     if other is not None:  # a transfer, volume or neighbourhood store: what it holds, as it is stored
-        return print_summary(other.summary(), args.json)
-    info = open_store(args.store).info()
+        return print_summary(other.summary(verify=args.verify), args.json)
+    info = open_store(args.store).info(verify=args.verify)
     if args.json:
         print(json.dumps(info, indent=2))
-        return 0
+        return 1 if info["damage"] else 0
     mode = info["mode"] + (f", threshold {info['threshold_deg']} deg" if info.get("threshold_deg") is not None else "")
     print(f"{args.store}: lodprt store v{info['format_version']} ({mode}) from {info['source']}")
     print(f"  vertices {info['vertices']:,}, triangles {info['faces']:,}")
@@ -76,7 +80,16 @@ def cmd_info(args) -> int:
     for s in info["samples"]:
         pos = "(" + ", ".join(f"{x:.3g}" for x in s["position"]) + ")"
         print(f"  {s['index']:>6} {pos:>30} {s['vertices_kept']:>9,} {s['lit']:>9,} {s['shadowed']:>9,} {s['bytes'] / 1024:>9,.0f}")
-    return 0
+    return report_damage(args.store, info["damage"])
+
+
+def report_damage(store, found: list[str]) -> int:
+    """``lodprt info``'s last lines: what is damaged, on stderr, and the exit status (1 when anything is)."""
+    for line in found:
+        print(f"{store}: damaged: {line}", file=sys.stderr)
+    if found:
+        print(f"{store}: the store is damaged; bake it again", file=sys.stderr)
+    return 1 if found else 0
 
 
 def cmd_radiance(args) -> int:
@@ -126,11 +139,11 @@ def print_summary(summary: dict, as_json: bool) -> int:
     """``lodprt info`` of a transfer, volume or neighbourhood store (``FormatStore.summary``)."""
     if as_json:
         print(json.dumps(summary, indent=2))
-        return 0
+        return 1 if summary["damage"] else 0
     print(f"{summary['store']}: {summary['kind']} v{summary['format_version']} (baked by {summary['baked_by']}; "
           f"{summary['bytes_on_disk'] / 1024:,.0f} KiB on disk)")
     for k, v in summary["attrs"].items():
         print(f"  {k}: {json.dumps(v) if isinstance(v, (dict, list)) else v}")
     for name, a in summary["arrays"].items():
         print(f"  {name}: {' x '.join(map(str, a['shape'])) or 'scalar'} {a['dtype']}")
-    return 0
+    return report_damage(summary["store"], summary["damage"])

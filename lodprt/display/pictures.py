@@ -23,20 +23,27 @@ from lodprt.runtime.sources import frame_source
 log = logging.getLogger(__name__)
 
 
-def check_output(path, suffixes: tuple[str, ...], *, overwrite: bool) -> Path:
-    """The output path, refused (LodprtError naming it) for a wrong suffix, a missing folder, a folder, or an
-    existing file without ``overwrite``."""
+def check_output(path, suffixes: tuple[str, ...], *, overwrite: bool | None, option: str = "overwrite=True") -> Path:
+    """The output path, refused (LodprtError naming it) for a suffix not among ``suffixes`` (in any case), a
+    missing folder, a folder, or an existing file without ``overwrite`` (None: not checked here). ``option`` is what
+    the caller calls the permission to replace (the CLI's ``--overwrite``)."""
     path = Path(path)
-    if path.suffix.lower() not in suffixes:
+    if path.suffix.lower() not in [s.lower() for s in suffixes]:
         raise LodprtError(f"{path}: the output must end in {' or '.join(suffixes)}")
     if not path.parent.is_dir():
         raise LodprtError(f"{path}: the folder {path.parent} does not exist")
-    if path.is_dir():  # a file never replaces a folder, overwrite or not
-        raise LodprtError(f"{path}: is a folder; the output must be a file (overwrite replaces a file, never a "
-                          "folder)")
-    if path.exists() and not overwrite:
-        raise LodprtError(f"{path}: already exists; pass overwrite=True to replace it")
+    refuse_replacing(path, overwrite, option)
     return path
+
+
+def refuse_replacing(path, overwrite: bool | None, option: str = "overwrite=True") -> None:
+    """Refuse an output ``path`` that is a folder (a file never replaces one, ``overwrite`` or not) or, unless
+    ``overwrite`` (None: not checked), an existing file."""
+    if Path(path).is_dir():
+        raise LodprtError(f"{path}: is a folder; the output must be a file ({option} replaces a file, never a "
+                          "folder)")
+    if overwrite is not None and Path(path).exists() and not overwrite:
+        raise LodprtError(f"{path}: already exists; pass {option} to replace it")
 
 
 EXR_EXTRA = "pip install 'lodprt[exr]'"

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.model import sh
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
+from lodprt.model.scene import RADIANCE_LIMIT
 
 #: file names of the six faces of a cube map given as a folder, in face order
 CUBE_FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
@@ -28,7 +29,8 @@ PROCEDURAL = ("sky", "spots", "constant")
 
 
 class EnvironmentMapError(LodprtError, ValueError):
-    """An environment map is missing, unreadable, of the wrong shape, or holds non-finite or negative radiance."""
+    """An environment map is missing, unreadable, of the wrong shape, or holds non-finite, negative or overflowing
+    radiance (above ``RADIANCE_LIMIT``)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,7 +83,7 @@ class Environment:
     def mip(self, level: int) -> "Environment":
         """The map downsampled ``level`` times by the solid-angle-weighted 2 x 2 box filter (I-3.2): the four
         children of a texel cover exactly its solid angle, so total power and the constant coefficient are kept."""
-        if isinstance(level, bool) or int(level) != level or level < 0:
+        if not is_whole(level, 0):
             raise EnvironmentMapError(f"{self.source}: mip level {level!r}: a whole number >= 0 (0: the map itself)")
         env = self
         for done in range(int(level)):
@@ -408,6 +410,13 @@ def _check_radiance(data: np.ndarray, where: str) -> np.ndarray:
         raise EnvironmentMapError(
             f"{where}: {int(neg.sum())} texel value(s) are negative (first at index {first}, value "
             f"{float(data[first]):.3g}); radiance must be >= 0"
+        )
+    big = data > RADIANCE_LIMIT
+    if big.any():  # each texel is finite, but the projections and the relighting sum them in float32
+        first = tuple(int(i) for i in np.argwhere(big)[0])
+        raise EnvironmentMapError(
+            f"{where}: {int(big.sum())} texel value(s) are above {RADIANCE_LIMIT:g} (first at index {first}, value "
+            f"{float(data[first]):.3g}): float32 relighting would overflow; scale the map down"
         )
     return data
 

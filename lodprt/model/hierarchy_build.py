@@ -30,6 +30,7 @@ from lodprt.model.hierarchy_inputs import BOUNDARY_WEIGHT, CONE_SLACK, checked_i
 from lodprt.model.hierarchy_levels import mesh_groups
 from lodprt.launches import KernelThreads, warp_view
 from lodprt.model.hierarchy_rounds import QUADRIC_ENTRIES, CollapseRounds, one_rings
+from lodprt.model.meshio import referenced_mask
 
 log = logging.getLogger(__name__)
 
@@ -257,14 +258,12 @@ def _build(positions, work, normals, group, seed, phases: int, threads: KernelTh
     """The topology, then the rounds (``_rounds``) on ``threads``: the rounds made and the nodes."""
     V = len(positions)
     quadric, boundary, frozen, rings = _topology(positions, work, threads)
-    used = np.zeros(V, bool)
-    used[work.ravel()] = True
-    movable = used & ~frozen & ~(boundary if keep_boundary else np.zeros(V, bool))
+    movable = referenced_mask(V, work) & ~frozen & ~(boundary if keep_boundary else np.zeros(V, bool))
     total = int(movable.sum())
     nodes = _Nodes(V, normals, total)
     st = CollapseRounds(np.arange(V, dtype=np.int32), positions, quadric, boundary, frozen, movable, group,
                         np.ascontiguousarray(work), split=split, threads=threads)
-    del quadric, boundary, frozen, movable, group, used
+    del quadric, boundary, frozen, movable, group
     if rings is not None:
         st.prime(rings)  # the topology's one-rings are the first round's
         del rings

@@ -19,6 +19,7 @@ import numpy as np
 from lodprt.devices import warp
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy import concat_ranges
+from lodprt.model.meshio import referenced_mask
 
 log = logging.getLogger(__name__)
 
@@ -156,11 +157,9 @@ def levels_from_chain(V: int, faces: np.ndarray, chain: list[np.ndarray]) -> np.
 
     faces (F, 3) the mesh before the first level, chain ``pymeshlab_chain``'s meshes (nested)."""
     level = np.zeros(V, np.int32)
-    alive = np.zeros(V, bool)
-    alive[faces.ravel()] = True
+    alive = referenced_mask(V, faces)
     for L, f in enumerate(chain, 1):
-        now = np.zeros(V, bool)
-        now[f.ravel()] = True
+        now = referenced_mask(V, f)
         level[alive & ~now] = L
         alive &= now  # nested by construction: each level is decimated from the previous one
     return level
@@ -195,10 +194,7 @@ def representative_scores(V: int, before: np.ndarray, after: np.ndarray) -> tupl
         return np.zeros(0, np.int64), np.zeros(0)
     e_before, e_after = edge_keys(before), edge_keys(after)
     gained = np.setdiff1d(e_after, e_before, assume_unique=True)
-    survive = np.zeros(V, bool)
-    survive[after.ravel()] = True
-    was = np.zeros(V, bool)
-    was[before.ravel()] = True
+    survive, was = referenced_mask(V, after), referenced_mask(V, before)
     removed = was & ~survive
     a, b = e_before // V, e_before % V
     src, dst = np.r_[a, b], np.r_[b, a]

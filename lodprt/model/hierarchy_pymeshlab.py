@@ -28,6 +28,7 @@ import numpy as np
 from lodprt.errors import LodprtError
 from lodprt.model.hierarchy_levels import halvings
 from lodprt.model.hierarchy_rounds import NEVER
+from lodprt.model.meshio import referenced_mask
 
 log = logging.getLogger(__name__)
 
@@ -48,8 +49,7 @@ def decimate_part(positions, faces, locked, target_base: int, keep_boundary: boo
     last, count = np.asarray(faces, np.int64), 0
     for count, f in enumerate(halvings(positions, faces, target_base=target_base, max_levels=MAX_LEVELS,
                                        keep_boundary=keep_boundary, locked=locked), 1):
-        now = np.zeros(len(positions), bool)
-        now[f.ravel()] = True
+        now = referenced_mask(len(positions), f)
         level[alive & ~now] = count  # nested: each level is decimated from the one before
         alive &= now
         last = f

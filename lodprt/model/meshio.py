@@ -99,6 +99,8 @@ def load_mesh(
         reader = "pymeshlab (trimesh found no faces)"
     elif suffix_of(path) == ".obj" and len(verts) != (n := obj_vertex_count(path, data)):
         verts, faces = _obj_by_pymeshlab(path, data, len(verts), n)
+    if suffix_of(path) == ".obj":
+        refuse_obj_index_zero(path, data)
         reader = f"pymeshlab (trimesh made {len(verts)} vertices of the file's {n})"
     log.info("%s: read with %s: %d vertices, %d triangles", path, reader, len(verts), len(faces))
     _check_coordinates(path, verts, np.inf, "in the file")
@@ -109,6 +111,13 @@ def load_mesh(
         placed = verts @ rot.T * float(scale) + np.asarray(translate, dtype=np.float64)
     _check_coordinates(path, placed, COORDINATE_LIMIT, "after up, rotate, scale and translate")
     return placed, faces.astype(np.int32)
+
+
+def referenced_mask(n: int, faces) -> np.ndarray:
+    """(n,) bool: True for the vertices ``faces`` use."""
+    mask = np.zeros(n, bool)
+    mask[np.asarray(faces).ravel()] = True
+    return mask
 
 
 def require_file(path: Path, what: str) -> None:
@@ -199,6 +208,21 @@ def obj_vertex_count(path: Path, data: bytes | None) -> int:
     return len(re.findall(rb"(?m)^[ \t]*v[ \t]", text))
 
 
+def refuse_obj_index_zero(path: Path, data: bytes | None) -> None:
+    """SceneError naming the line of the first ``f`` line with a vertex index 0: OBJ counts vertices from 1 (and
+    from -1 backwards), so 0 names none, and the readers silently took another vertex for it."""
+    import re
+
+    text = path.read_bytes() if data is None else data
+    for found in re.finditer(rb"[ \t][+]?0+(?=[/ \t\r\n]|$)", text):  # a token 0: on an f line, an index
+        start = text.rfind(b"\n", 0, found.start()) + 1
+        if not text[start:found.start()].lstrip(b" \t").startswith(b"f"):
+            continue
+        line = text.count(b"\n", 0, start) + 1
+        raise SceneError(f"{path}: field 'faces': line {line} uses vertex index 0; OBJ vertex indices start at 1 "
+                         "(negative ones count back from the last vertex)")
+
+
 def _obj_by_pymeshlab(path: Path, data: bytes | None, made: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """pymeshlab's reading of an OBJ whose vertices trimesh duplicated or reordered (several ``usemtl`` groups with
     texture coordinates or normals give each group its own copies), checked to keep the file's ``n`` vertices."""
@@ -246,10 +270,9 @@ def _fallback(path: Path, verts: np.ndarray, points: np.ndarray, data: bytes | N
             f"{path}: field 'faces': no faces: {seen}, and pymeshlab could not read it: {exc}"
         ) from exc
     if len(pf) == 0:
-        raise SceneError(
-            f"{path}: field 'faces': no faces: {seen}, pymeshlab read {len(pv)} vertices and no faces; "
-            "point clouds cannot be baked"
-        )
+        what = "point clouds cannot be baked" if len(pv) or len(verts) or len(points) else "the mesh is empty"
+        raise SceneError(f"{path}: field 'faces': no faces: {seen}, pymeshlab read {len(pv)} vertices and no faces; "
+                         f"{what}")
     # whatever trimesh did read must be what pymeshlab read, or store vertex i might not be the file's vertex i
     mine = verts if len(verts) else points
     if len(mine) and (mine.shape != pv.shape or not np.allclose(mine, pv, rtol=1e-7, atol=0.0, equal_nan=True)):

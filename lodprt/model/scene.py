@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lodprt.errors import SceneError
+from lodprt.errors import SceneError, is_whole
 from lodprt.model.meshio import (  # noqa: F401  (load_mesh is public)
-    COORDINATE_LIMIT, UP_AXES, load_mesh, mesh_name, require_file,
+    COORDINATE_LIMIT, UP_AXES, load_mesh, mesh_name, referenced_mask, require_file,
 )
 
 log = logging.getLogger(__name__)
@@ -346,7 +346,7 @@ def _grid(where: str, table) -> tuple[int, int, int]:
     """The light grid, refused when it asks for more than MAX_LIGHT_SAMPLES samples (before anything is allocated)."""
     _check_keys(where, table, _LIGHT_KEYS)
     grid = table.get("grid", [3, 1, 3])
-    if not isinstance(grid, list) or len(grid) != 3 or not all(isinstance(g, int) and not isinstance(g, bool) for g in grid):
+    if not isinstance(grid, list) or len(grid) != 3 or not all(is_whole(g, integer_type=True) for g in grid):
         raise SceneError(f"{where}.grid: expected 3 integers, got {_show(grid)}")
     if min(grid) < 1:
         raise SceneError(f"{where}.grid: every axis needs at least 1 sample, got {_show(grid)}")
@@ -428,7 +428,7 @@ def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=
     its mesh ``origins[k]`` (default "its mesh"). Raises SceneError when an object has no face of non-zero area:
     it would bake "successfully" with nothing but fallback normals.
     """
-    used = []  # each object's referenced vertices: one no face uses is never baked, so it sizes nothing
+    used, masks = [], []  # each object's referenced vertices: one no face uses is never baked, so it sizes nothing
     for k, (name, p, f, _) in enumerate(objects):
         where = wheres[k] if wheres else f"{source}: object[{k}] (name {_show(name)})"
         origin = origins[k] if origins else "its mesh"
@@ -436,7 +436,8 @@ def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=
         if not face_has_area(p, f).any():
             raise SceneError(f"{where}: every face of {origin} has zero area after placement; nothing to bake (faces "
                              "with area in the file collapse when 'translate' takes them far from the origin)")
-        used.append(p[np.unique(f)])
+        masks.append(referenced_mask(len(p), f))
+        used.append(np.asarray(p)[masks[-1]])
     all_pos = np.concatenate(used)
     bounds = np.stack([all_pos.min(axis=0), all_pos.max(axis=0)])
     extent = max(float((u.max(axis=0) - u.min(axis=0)).max()) for u in used)
@@ -451,6 +452,7 @@ def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=
             )
         fp, ff = floor_mesh(bounds, resolution, margin, extent)
         parts.append(("floor", fp, ff, mat))
+        masks.append(referenced_mask(len(fp), ff))
     materials: list[Material] = []
     positions, faces, mat_id, obj_id, names = [], [], [], [], []
     offset = 0
@@ -467,8 +469,7 @@ def assemble_scene(objects, floor, light_table, where_lights, source, *, wheres=
     faces = np.concatenate(faces)
     if offset >= 2**31:
         raise SceneError(f"{source}: {offset} vertices do not fit the int32 face indices of the store")
-    referenced = np.zeros(len(positions), bool)
-    referenced[faces.ravel()] = True
+    referenced = np.concatenate(masks)
     full_bounds = np.stack([positions[referenced].min(axis=0), positions[referenced].max(axis=0)])
     diagonal = float(np.linalg.norm(full_bounds[1] - full_bounds[0]))
     coord = float(np.abs(full_bounds).max())
@@ -542,7 +543,7 @@ def _floor(path: Path, ft) -> tuple[int, float, Material]:
     where = f"{path}: floor"
     _check_keys(where, ft, _FLOOR_KEYS)
     res = ft.get("resolution", 380)
-    if isinstance(res, bool) or not isinstance(res, int) or not 2 <= res <= MAX_FLOOR_RESOLUTION:
+    if not is_whole(res, 2, MAX_FLOOR_RESOLUTION, integer_type=True):
         raise SceneError(f"{where}.resolution: expected an integer from 2 to {MAX_FLOOR_RESOLUTION}, got {_show(res)}")
     margin = _number(f"{where}.margin", ft.get("margin", 1.0), minimum=0.0)
     return res, margin, _material(where, ft, THESIS_MATERIAL)

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from lodprt.errors import is_whole
+
 _SQRT2 = np.sqrt(2.0)
 _Y00 = 1.0 / np.sqrt(4.0 * np.pi)
 
@@ -29,15 +31,13 @@ def num_coefficients(order: int) -> int:
 
 def sh_index(l: int, m: int) -> int:
     """Single index i = l(l+1) + m of band l, degree m (0 <= |m| <= l)."""
-    if int(l) != l or int(m) != m or not 0 <= abs(m) <= l:
+    if not (is_whole(l, 0) and is_whole(m, -l, l)):
         raise ValueError(f"sh_index: need integers with |m| <= l, got l={l!r}, m={m!r}")
     return int(l) * (int(l) + 1) + int(m)
 
 
 def _check_order(order, name="order") -> int:
-    if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer, float, np.floating)):
-        raise ValueError(f"{name} must be an integer >= 1, got {order!r}")
-    if not np.isfinite(order) or int(order) != order or order < 1:
+    if not is_whole(order, 1):
         raise ValueError(f"{name} must be an integer >= 1, got {order!r}")
     return int(order)
 

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from lodprt.devices import load_kernels, resolve_device
-from lodprt.errors import Interrupted, LodprtError
+from lodprt.errors import Interrupted, LodprtError, is_whole
 from lodprt.kernels.visibility import BACK_FACING, LIT, SHADOWED
 from lodprt.model.scene import Scene
 from lodprt.precompute.baker import Baker, bake_kernels, layout, material_tables, ray_offset
@@ -367,15 +367,14 @@ def check_sh_order(sh_order: int, *, name: str = "sh_order") -> None:
     """Refuse an SH order the float32 kernels do not cover (called ``name`` in the message)."""
     from lodprt.kernels import sh as ksh
 
-    whole = isinstance(sh_order, (int, np.integer)) and not isinstance(sh_order, bool)
-    if not whole or not 1 <= sh_order <= ksh.MAX_KERNEL_ORDER:
+    if not is_whole(sh_order, 1, ksh.MAX_KERNEL_ORDER, integer_type=True):
         raise LodprtError(f"{name} {sh_order!r}: a whole number from 1; the float32 kernels go up to order "
                           f"{ksh.MAX_KERNEL_ORDER}")
 
 
 def check_jobs(jobs) -> None:
     """Refuse a thread count that is not a whole number >= 1 (None: the default)."""
-    if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1):
+    if jobs is not None and not is_whole(jobs, 1, integer_type=True):
         raise LodprtError(f"jobs {jobs!r}: the threads baking samples, a whole number >= 1 (or None)")
 
 

@@ -21,7 +21,7 @@ import threading
 import numpy as np
 
 from lodprt.devices import warp
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
 from lodprt.kernels.visibility import BACK_FACING, LIT
 from lodprt.launches import launch_ranges
 from lodprt.model import sh
@@ -78,11 +78,11 @@ class GISettings:
     indirect_tolerance: float | None = None
 
     def __post_init__(self):
-        if isinstance(self.bounces, bool) or int(self.bounces) != self.bounces or not 0 <= self.bounces <= 64:
+        if not is_whole(self.bounces, 0, 64):
             raise LodprtError(f"bounces {self.bounces!r}: must be an integer in 0..64")
         if not (math.isfinite(self.threshold) and self.threshold >= 0):
             raise LodprtError(f"bounce_threshold {self.threshold!r}: must be finite and >= 0")
-        if isinstance(self.rays, bool) or int(self.rays) != self.rays or not 1 <= self.rays <= 1 << 16:
+        if not is_whole(self.rays, 1, 1 << 16):
             raise LodprtError(f"gi_rays {self.rays!r}: must be an integer in 1..65536")
         t = self.indirect_threshold_deg
         if t is not None and not (math.isfinite(t) and 0 <= t <= 180):

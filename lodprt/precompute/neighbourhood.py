@@ -24,7 +24,7 @@ import numpy as np
 from lodprt.devices import resolve_device, warp
 from lodprt.launches import launch_ranges
 from lodprt.deprecation import renamed_arguments
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
 from lodprt.precompute.transfer import Geometry, diffuse_transfer, fibonacci_directions
 from lodprt.store.neighbourhood_store import prepare_neighbourhood_destination, write_neighbourhood_store
 
@@ -96,9 +96,9 @@ def transfer_matrices(positions, faces, points, *, order: int, transferred_order
     from lodprt.kernels import neighbourhood as kn
 
     for o in (order, transferred_order):
-        if isinstance(o, bool) or int(o) != o or not 1 <= o <= 8:
+        if not is_whole(o, 1, 8):
             raise LodprtError(f"sh order {o!r}: the neighbourhood kernels offer orders 1..8")
-    if isinstance(rays, bool) or int(rays) != rays or rays < 1:
+    if not is_whole(rays, 1):
         raise LodprtError(f"rays {rays!r}: need at least one direction per grid point")
     wp = warp()
     device = resolve_device(device)

@@ -17,7 +17,7 @@ import numpy as np
 from lodprt.devices import load_kernels, resolve_device, warp
 from lodprt.launches import launch_ranges
 from lodprt.deprecation import renamed_arguments
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
 from lodprt.model import sh
 from lodprt.model.scene import bounds_offset, ray_offset, referenced_bounds
 from lodprt.store.transfer_store import prepare_transfer_destination, write_transfer_store
@@ -219,7 +219,7 @@ def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", 
     """
     if mode not in MODES:
         raise LodprtError(f"transfer mode {mode!r}: choose one of {', '.join(MODES)}")
-    if isinstance(order, bool) or int(order) != order or not 1 <= order <= 8:
+    if not is_whole(order, 1, 8):
         raise LodprtError(f"sh order {order!r}: the transfer kernels offer orders 1..8")
     if bounces < 0 or not np.isfinite(threshold) or threshold < 0 or max_mirror < 0:
         raise LodprtError(f"bounces {bounces}, threshold {threshold} and max_mirror {max_mirror} must be >= 0")
@@ -274,6 +274,12 @@ def diffuse_transfer(geom: Geometry, *, order: int = 3, mode: str = "shadowed", 
     return DiffuseTransfer(total.astype(np.float32), mode, order, rays, energy, passes, time.perf_counter() - t0, threshold)
 
 
+def check_glossy_order(order) -> None:
+    """LodprtError unless ``order`` is a whole number in 1..8 (the glossy matrices' orders the kernels offer)."""
+    if not is_whole(order, 1, 8):
+        raise LodprtError(f"glossy order {order!r}: the transfer kernels offer orders 1..8")
+
+
 def glossy_transfer(geom: Geometry, ids=None, *, order: int = 3, lighting_order: int | None = None, rays: int = 256,
                     mode: str = "shadowed", rotate: bool = False, seed: int = 0, chunk: int = 1 << 14,
                     jobs: int | None = None) -> np.ndarray:
@@ -288,8 +294,7 @@ def glossy_transfer(geom: Geometry, ids=None, *, order: int = 3, lighting_order:
         raise LodprtError(f"glossy mode {mode!r}: choose one of {', '.join(GLOSSY_MODES)}")
     lighting_order = order if lighting_order is None else int(lighting_order)
     for o in (order, lighting_order):
-        if isinstance(o, bool) or int(o) != o or not 1 <= o <= 8:
-            raise LodprtError(f"glossy order {o!r}: the transfer kernels offer orders 1..8")
+        check_glossy_order(o)
     wp = warp()
     mesh, pts, nrm, _ = geom._warp()
     ids = np.nonzero(geom.referenced)[0] if ids is None else np.asarray(ids)
@@ -401,9 +406,8 @@ def bake_transfer(scene, out, *, sh_order: int = 3, mode: str = "interreflected"
     store; the rest are completed on reading (T-15).
     """
     device = resolve_device(device)
-    g = glossy_order
-    if g is not None and (isinstance(g, bool) or int(g) != g or not 1 <= g <= 8):  # before any work, glossy or not
-        raise LodprtError(f"glossy order {g!r}: the transfer kernels offer orders 1..8")
+    if glossy_order is not None:  # before any work, glossy or not
+        check_glossy_order(glossy_order)
     if out is not None:
         prepare_transfer_destination(out, overwrite=overwrite)
     t_load = load_kernels(device, *transfer_kernels())

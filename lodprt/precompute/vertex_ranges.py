@@ -23,21 +23,20 @@ over every vertex of a sample and is refused with vertex ranges.
 
 from __future__ import annotations
 
-import numbers
 import socket
 import time
 from pathlib import Path
 
 import numpy as np
 
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
 
 
 def check_vertex_range(vertex_range, *, bounces: int = 0) -> None:
     """Refuse a ``vertex_range`` that is not an integer >= 1 (None: off), or one with interreflection."""
     if vertex_range is None:
         return
-    if isinstance(vertex_range, bool) or not isinstance(vertex_range, numbers.Integral) or vertex_range < 1:
+    if not is_whole(vertex_range, 1, integer_type=True):
         raise LodprtError(f"--vertex-range / vertex_range {vertex_range!r}: must be an integer >= 1 (the most baked "
                           "vertices of a light sample one dask task computes; not given: whole samples)")
     if bounces:

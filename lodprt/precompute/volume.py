@@ -23,7 +23,7 @@ import numpy as np
 from lodprt.devices import load_kernels, resolve_device, warp
 from lodprt.launches import launch_ranges
 from lodprt.deprecation import renamed_arguments
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
 from lodprt.precompute.transfer import fibonacci_directions
 from lodprt.store.volume_store import prepare_volume_destination, write_volume_store
 
@@ -145,11 +145,11 @@ def volume_transfer(grid: VolumeGrid, *, order: int = 3, rays: int = 128, bounce
     """Shadowed (V-3) plus ``bounces`` interreflected (V-4) passes at most, stopping once a pass' energy is below
     ``threshold`` times the direct pass'. ``rotate`` turns the direct pass' ray set per voxel (the bounce passes
     always do: random directions); ``progress(done, total)`` after each pass; ``jobs`` CPU threads."""
-    if isinstance(order, bool) or int(order) != order or not 1 <= order <= 8:
+    if not is_whole(order, 1, 8):
         raise LodprtError(f"sh order {order!r}: the volume kernels offer orders 1..8")
-    if isinstance(rays, bool) or int(rays) != rays or rays < 1:
+    if not is_whole(rays, 1):
         raise LodprtError(f"rays {rays!r}: need at least one direction per voxel")
-    if isinstance(bounces, bool) or int(bounces) != bounces or bounces < 0 or not np.isfinite(threshold) or threshold < 0:
+    if not is_whole(bounces, 0) or not np.isfinite(threshold) or threshold < 0:
         raise LodprtError(f"bounces {bounces!r} and threshold {threshold!r} must be >= 0")
     t0 = time.perf_counter()
     shape = grid.volume.shape

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
 from lodprt.model.scene import referenced_bounds
 
 log = logging.getLogger(__name__)
@@ -49,8 +49,7 @@ class Camera:
         size = []
         for name in ("width", "height"):  # whole pixels: 320.0 is 320, 320.5 or "320" is refused
             v = getattr(self, name)
-            ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and np.isfinite(v)
-            if not ok or float(v) != int(v) or int(v) < 1:
+            if not is_whole(v, 1):
                 raise LodprtError(f"camera size: {self.width!r} x {self.height!r}; width and height must be whole "
                                   "numbers >= 1")
             size.append(int(v))

@@ -206,14 +206,23 @@ def auto_white(radiance) -> float:
 EXPOSURE_LIMIT = 100.0
 
 
+def check_white(white, prefix: str = "") -> None:
+    """LodprtError naming ``{prefix}white`` unless it is a positive finite radiance (the one shown as white)."""
+    from lodprt.errors import LodprtError
+
+    if not (np.isfinite(white) and white > 0):
+        raise LodprtError(f"{prefix}white {white:g}: must be a positive radiance (the one shown as white)")
+
+
 def tone_scale(white, exposure, prefix: str = "") -> float:
     """The tone mapping's 2^exposure / white (display = clip(scale L, 0, 1)), or LodprtError naming
     ``{prefix}white`` / ``{prefix}exposure`` when white is not > 0, exposure not finite within +-EXPOSURE_LIMIT
     stops, or the scale beyond float32."""
     from lodprt.errors import LodprtError
 
-    if not (np.isfinite(white) and white > 0 and np.isfinite(exposure)):
-        raise LodprtError(f"tone mapping: {prefix}white {white!r} must be > 0 and {prefix}exposure {exposure!r} finite")
+    check_white(white, prefix)
+    if not np.isfinite(exposure):
+        raise LodprtError(f"tone mapping: {prefix}exposure {exposure!r}: must be finite")
     if abs(exposure) > EXPOSURE_LIMIT:
         raise LodprtError(f"tone mapping: {prefix}exposure {exposure!r}: at most {EXPOSURE_LIMIT:g} stops either way")
     scale = 2.0 ** float(exposure) / float(white)

@@ -479,7 +479,7 @@ class Runtime:
         steer += time.perf_counter() - t3  # M-6 (and its first-frame rounds) count as cut work
         t3 = time.perf_counter()
         new = self.budgets.after_frame(self.error_bound, len(tri), 1e3 * (t3 - t0),  # B-1, B-2
-                                       self.lod and not (estimating or settle or still))
+                                       self.lod and not (estimating or settle or still), not (refined or coarsened))
         if new != self.error_bound:
             self.error_bound, self.refinement.dirty = new, True
         stats = {

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import LodprtError, StoreError
-from lodprt.store.reader import folder_bytes, read_array
+from lodprt.store.reader import damage, folder_bytes, read_array
 from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_format
 
 log = logging.getLogger(__name__)
@@ -127,9 +127,7 @@ class Store:
     @property
     def intensity(self) -> np.ndarray:
         if "lights/intensity" not in self._cache:  # read once: the run time asks every frame
-            attrs = self.root["lights"].attrs
-            if "intensity" not in attrs:
-                raise StoreError(f"{self.path}: lights: attribute intensity missing: the store is damaged; bake it again")
+            attrs = self.required_attrs("lights", self.root["lights"].attrs, ("intensity",))
             self._cache["lights/intensity"] = np.asarray(attrs["intensity"], dtype=np.float64)
         return self._cache["lights/intensity"].copy()
 
@@ -164,16 +162,23 @@ class Store:
         try:
             return self.root[name]
         except KeyError:
-            raise StoreError(f"{self.path}: the group '{name}' is missing: the store is damaged; bake it again") from None
+            raise self.damaged(f"the group '{name}' is missing") from None
 
     def sample_info(self, k: int) -> dict:
         """Sample ``k``'s recorded statistics, StoreError naming any ``SAMPLE_ATTRS`` missing."""
-        a = dict(self.group(k).attrs)
-        lost = [key for key in SAMPLE_ATTRS if key not in a]
+        return self.required_attrs(sample_group(k), self.group(k).attrs, SAMPLE_ATTRS)
+
+    def required_attrs(self, where: str, attrs, keys) -> dict:
+        """``attrs`` (of ``where`` in this store) as a dict, StoreError naming any of ``keys`` it lacks."""
+        a = dict(attrs)
+        lost = [key for key in keys if key not in a]
         if lost:
-            raise StoreError(f"{self.path}: {sample_group(k)}: attribute(s) {', '.join(lost)} missing: the store is "
-                             "damaged; bake it again")
+            raise self.damaged(f"{where}: attribute(s) {', '.join(lost)} missing")
         return a
+
+    def damaged(self, what: str) -> StoreError:
+        """The error for a part of this store that its bake wrote and that is gone."""
+        return StoreError(f"{self.path}: {what}: the store is damaged; bake it again")
 
     def completion_plan(self):
         """The geometry-only completion weights of this store's hierarchy (computed once, then cached)."""
@@ -268,8 +273,9 @@ class Store:
         except LodprtError as e:
             raise StoreError(f"{self.path}: hierarchy/: {e}") from None
 
-    def info(self) -> dict:
-        """The summary ``lodprt info --json`` prints."""
+    def info(self, *, verify: bool = False) -> dict:
+        """The summary ``lodprt info --json`` prints; ``damage``: what is damaged (``reader.damage``: chunk files
+        missing, and with ``verify`` every array read whole)."""
         samples = []
         for k, pos in enumerate(self.light_positions):
             a = self.sample_info(k)
@@ -316,6 +322,7 @@ class Store:
             out["hierarchy_method"] = None
         out["bytes_total"] = int(sum(s["bytes"] for s in samples))
         out["bytes_on_disk"] = folder_bytes(self.path)
+        out["damage"] = damage(self.root, self.path, all_chunks=bool(self.attrs.get(ALL_CHUNKS)), verify=verify)
         from lodprt.store.codecs import codec_summary  # version 2: codec, store-level bytes, version-1 payload
 
         return {**out, **codec_summary(self)}

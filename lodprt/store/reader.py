@@ -36,6 +36,33 @@ def read_array(root, path: Path, name: str, *, all_chunks: bool) -> np.ndarray:
     return value
 
 
+def array_names(group, prefix: str = "") -> list[str]:
+    """The paths of every array under the zarr ``group``, sorted, sub-groups included."""
+    names = []
+    for name, member in sorted(group.members()):
+        names.extend([prefix + name] if hasattr(member, "shape") else array_names(member, f"{prefix}{name}/"))
+    return names
+
+
+def damage(root, path: Path, *, all_chunks: bool, verify: bool = False) -> list[str]:
+    """What is damaged in the store at ``path`` (zarr group ``root``), one line per array: a chunk file missing
+    from a store whose writer stored every chunk; with ``verify``, every array read whole, so a garbled chunk is
+    found too (``lodprt info --verify``). Empty when nothing is."""
+    found = []
+    for name in array_names(root):
+        try:
+            if verify:
+                read_array(root, path, name, all_chunks=all_chunks)
+            else:
+                arr = root[name]
+                missing = arr.nchunks - arr.nchunks_initialized if all_chunks and arr.size else 0
+                if missing:
+                    found.append(f"array '{name}': {missing} of its {arr.nchunks} chunk files are missing")
+        except StoreError as exc:
+            found.append(str(exc).removeprefix(f"{path}: ").split("; inspect the store")[0])
+    return found
+
+
 def folder_bytes(folder) -> int:
     """Bytes of the files under ``folder`` (0 when it does not exist): a store's size on disk."""
     folder = Path(folder)
@@ -85,26 +112,19 @@ class FormatStore:
         """SH bands of the lighting the store's transfer takes."""
         return int(self.attrs["sh_order"])
 
-    def summary(self) -> dict:
+    def summary(self, *, verify: bool = False) -> dict:
         """What ``lodprt info`` prints of a store of this kind: its kind, format version, the command that bakes
         one, its root attributes (JSON values only; long lists shortened) and every array's shape and dtype, with
-        the bytes on disk."""
+        the bytes on disk and what is damaged (``damage``; ``verify``: every array read whole)."""
         def plain(v):
             if isinstance(v, (list, tuple)) and len(v) > 12:
                 return f"{len(v)} values"
             return v if isinstance(v, (str, int, float, bool, list, tuple, dict)) or v is None else str(v)
 
-        arrays = {}
-
-        def walk(group, prefix: str) -> None:
-            for name, member in sorted(group.members()):
-                if hasattr(member, "shape"):
-                    arrays[prefix + name] = {"shape": list(member.shape), "dtype": str(member.dtype)}
-                else:
-                    walk(member, f"{prefix}{name}/")
-
-        walk(self.root, "")
+        arrays = {name: {"shape": list(self.root[name].shape), "dtype": str(self.root[name].dtype)}
+                  for name in array_names(self.root)}
         return {"store": str(self.path), "kind": self.WHAT, "format": self.FORMAT,
                 "format_version": self.attrs.get("format_version"), "baked_by": self.BAKE,
                 "attrs": {k: plain(v) for k, v in sorted(self.attrs.items()) if k not in ("format", "format_version")},
-                "arrays": arrays, "bytes_on_disk": folder_bytes(self.path)}
+                "arrays": arrays, "bytes_on_disk": folder_bytes(self.path),
+                "damage": damage(self.root, self.path, all_chunks=bool(self.attrs.get(ALL_CHUNKS)), verify=verify)}
