@@ -93,14 +93,16 @@ def load_mesh(
     require_file(path, "mesh")
     data = decompressed(path)
     verts, faces, points = _read_trimesh(path, data)
+    obj = suffix_of(path) == ".obj"
+    text = (path.read_bytes() if data is None else data) if obj else None  # the OBJ's bytes, read once more
     reader = "trimesh"
     if len(faces) == 0:
         verts, faces = _fallback(path, verts, points, data)
         reader = "pymeshlab (trimesh found no faces)"
-    elif suffix_of(path) == ".obj" and len(verts) != (n := obj_vertex_count(path, data)):
+    elif obj and len(verts) != (n := obj_vertex_count(path, text)):
         verts, faces = _obj_by_pymeshlab(path, data, len(verts), n)
-    if suffix_of(path) == ".obj":
-        refuse_obj_index_zero(path, data)
+    if obj:
+        refuse_obj_index_zero(path, text)
         reader = f"pymeshlab (trimesh made {len(verts)} vertices of the file's {n})"
     log.info("%s: read with %s: %d vertices, %d triangles", path, reader, len(verts), len(faces))
     _check_coordinates(path, verts, np.inf, "in the file")
@@ -216,7 +218,7 @@ def refuse_obj_index_zero(path: Path, data: bytes | None) -> None:
     text = path.read_bytes() if data is None else data
     for found in re.finditer(rb"[ \t][+]?0+(?=[/ \t\r\n]|$)", text):  # a token 0: on an f line, an index
         start = text.rfind(b"\n", 0, found.start()) + 1
-        if not text[start:found.start()].lstrip(b" \t").startswith(b"f"):
+        if text[start:found.start() + 1].lstrip(b" \t")[:2] not in (b"f ", b"f\t"):
             continue
         line = text.count(b"\n", 0, start) + 1
         raise SceneError(f"{path}: field 'faces': line {line} uses vertex index 0; OBJ vertex indices start at 1 "
