@@ -232,6 +232,20 @@ def test_add_samples_equals_fresh_bake_of_the_bigger_grid(tmp_path):
         assert all((x == y).all() for x, y in zip(w_fresh, w_grown))
 
 
+def test_an_extension_asking_another_hierarchy_build_says_it_keeps_the_stores(tmp_path, caplog):
+    """--add-samples (as --resume) keeps the store's hierarchy, which its samples were cut on: asking another
+    build (here rounds on a sequential store) is said in a warning naming both, not ignored without a word."""
+    box = (-1.0, 1.5, -1.0, 1.0, 2.5, 1.0)
+    out = tmp_path / "s.zarr"
+    api_bake(scene_file(tmp_path, grid=(1, 1, 1), box=box, name="a.toml"), out)
+    assert open_store(out).hierarchy().method == "sequential"
+    with caplog.at_level("WARNING", logger="lodprt.precompute.bake"):
+        api_bake(scene_file(tmp_path, grid=(3, 1, 1), box=box, name="b.toml"), out, add_samples=True,
+                 hierarchy_method="rounds")
+    assert "keeps the hierarchy it was baked with (sequential), not a rounds build" in caplog.text
+    assert open_store(out).hierarchy().method == "sequential"
+
+
 def test_add_samples_refuses_a_grid_without_the_old_samples(tmp_path):
     """A grid that does not contain every old position (2 -> 4 cells over the same box: cell centres move) is
     refused before any work, naming the sample; --add-samples without a store says there is none."""

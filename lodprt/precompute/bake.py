@@ -384,7 +384,11 @@ def _hierarchy(scene: Scene, tree, target, progress, method: str) -> tuple[objec
     from lodprt.model.hierarchy_build import build_hierarchy
 
     if target is not None and target.complete("hierarchy"):
-        return target.hierarchy()
+        stored, seconds = target.hierarchy()
+        if stored.method != method:  # the store stays one bake: its samples were cut on the stored hierarchy
+            log.warning("%s: keeps the hierarchy it was baked with (%s), not a %s build: a resumed or extended bake "
+                        "uses the store's hierarchy", target.path, stored.method, method)
+        return stored, seconds
     t_h = time.perf_counter()
     if tree is None:
         tree = build_hierarchy(scene.positions, scene.faces, scene.normals, progress=progress, method=method)
