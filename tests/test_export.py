@@ -225,6 +225,10 @@ def test_look_at_quaternion_in_every_direction():
         np.testing.assert_allclose(rotate(q, (0, 0, -1)), f, atol=1e-9)
         up = rotate(q, (0, 1, 0))
         assert abs(up @ f) < 1e-9 and up[1] > 0
+    for target in ((0.0, -3.0, 0.0), (0.0, 3.0, 0.0)):  # straight along up: the viewers' fallback (it was NaN)
+        q = look_at_quaternion((0.0, 0.0, 0.0), target, (0.0, 1.0, 0.0))
+        assert np.isfinite(q).all() and abs(np.linalg.norm(q) - 1) < 1e-12
+        np.testing.assert_allclose(rotate(q, (0, 0, -1)), np.sign(target[1]) * np.array([0, 1.0, 0]), atol=1e-9)
 
 
 @pytest.mark.parametrize("name", ["grey", "rgb"])
@@ -294,7 +298,8 @@ def test_export_glb_api_and_overwrite(stores, tmp_path):
     (["export", "{store}", "--sample", -1, "-o", "{out}"], "sample -1 out of range"),
     (["export", "{store}", "-o", "{existing}"], "already exists; pass --overwrite"),
     (["export", "{store}", "-o", "{wrong}"], "must be a .glb file"),
-    (["export", "{store}", "--sample", 1, "--color", 1, 1, 1, "-o", "{out}"], "--color goes with --light"),
+    (["export", "{store}", "--sample", 1, "--color", 1, 1, 1, "-o", "{out}"], "--color goes with --light, not with --sample"),
+    (["export", "{store}", "--color", 1, 1, 1, "-o", "{out}"], "without --light the middle stored sample is drawn"),
     (["export", "{store}", "--light", 0, 1, 0, "--color", 1, 1, 1, "--color", 1, 1, 1, "-o", "{out}"], "--color: 2 given"),
     (["export", "{store}", "--white", 0, "-o", "{out}"], "--white 0"),
 ])

@@ -118,6 +118,23 @@ def test_damaged_chunk_is_one_line_naming_store_array_and_info(tmp_path, spot_sc
     assert open_store(out).sample(0)[0].size > 0  # the other samples still read
 
 
+@pytest.mark.parametrize("damage", ["garbled metadata", "lost metadata"])
+def test_info_on_a_store_whose_array_metadata_is_damaged(tmp_path, spot_scene, capsys, damage):
+    """An array's zarr.json garbled or gone (the array cannot even be opened) is damage that info names in one
+    line and exits 1 for (it raised JSONDecodeError or KeyError with a traceback)."""
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    meta = out / ("samples/00001/coefficients" if damage == "garbled metadata" else "scene/positions") / "zarr.json"
+    if damage == "garbled metadata":
+        meta.write_text("{bad")
+    else:
+        meta.unlink()
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and f"{out}: damaged: cannot be read whole: " in err and "bake it again" in err, err
+
+
 def test_info_verify_of_an_intact_store_and_of_a_transfer_store(tmp_path, spot_scene, capsys):
     """An intact store: info and info --verify exit 0 and report no damage (JSON: "damage": []); a transfer store
     with a chunk file gone: info names it and exits 1."""

@@ -50,10 +50,16 @@ def _add_radiance(sub) -> None:
 def cmd_info(args) -> int:
     from lodprt.store.bake_store import open_store
 
-    other = other_store(args.store)
-    if other is not None:  # a transfer, volume or neighbourhood store: what it holds, as it is stored
-        return print_summary(other.summary(verify=args.verify), args.json)
-    info = open_store(args.store).info(verify=args.verify)
+    try:
+        other = other_store(args.store)
+        if other is not None:  # a transfer, volume or neighbourhood store: what it holds, as it is stored
+            return print_summary(other.summary(verify=args.verify), args.json)
+        info = open_store(args.store).info(verify=args.verify)
+    except LodprtError:
+        raise
+    except (KeyError, ValueError, OSError) as exc:  # a part its bake wrote is gone or garbled (metadata included)
+        detail = " ".join(str(exc).split())[:200]
+        return report_damage(args.store, [f"cannot be read whole: {type(exc).__name__}: {detail}"])
     if args.json:
         print(json.dumps(info, indent=2))
         return 1 if info["damage"] else 0

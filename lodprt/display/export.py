@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import LodprtError
-from lodprt.runtime.camera import Camera, default_eye, scene_centre
+from lodprt.runtime.camera import Camera, default_eye, scene_centre, view_up
 from lodprt.runtime.frames import auto_white, tone_scale
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.sources import frame_source
@@ -120,7 +120,7 @@ def look_at_quaternion(eye, target, up) -> list[float]:
     camera looks down its local -z with +y up, so the rotation's columns are (right, up, -forward)."""
     f = np.subtract(target, eye).astype(np.float64)
     f /= np.linalg.norm(f)
-    r = np.cross(f, up)
+    r = np.cross(f, view_up(f, up))  # looking straight along up: the viewers' fallback, never a NaN rotation
     r /= np.linalg.norm(r)
     u = np.cross(r, f)
     m = np.stack([r, u, -f], axis=1)  # columns
@@ -280,6 +280,8 @@ def export_glb(store, out, *, sample: int | None = None, lights=None, colors=Non
 
         store = open_store(store)
     if sample is None and lights is None:
+        if colors is not None:  # before the middle sample stands in for the light: no --sample was given
+            raise LodprtError("--color goes with --light; without --light the middle stored sample is drawn")
         sample = store.num_samples // 2
     frame, source = export_frame(store, sample=sample, lights=lights, colors=colors, eye=eye, target=target, up=up,
                                  fov=fov, size=size, lod=lod, error_bound=error_bound, alpha=alpha,
