@@ -180,6 +180,26 @@ def test_a_budget_always_missed_coarsens_to_the_highest_bound(store):
     assert rt.estimated_psnr is not None and np.isfinite(rt.estimated_psnr)
 
 
+def test_a_bound_set_under_the_floor_gives_way_to_it(store):
+    """B-2: a bound set by set_error_bound under the floor is the floor, as every bound is: the bound the frame's
+    cut converges to is the one its stats report (it used to draw the set bound and report the floor)."""
+    rt = Runtime(store, device="cpu", error_bound=0.05, frame_ms=1e-3)  # every timed frame misses the budget
+    _orbit(rt, 5)
+    floor = rt.budgets.floor
+    assert floor > 0.05
+    rt.set_error_bound(floor / 100)
+    assert rt.error_bound == floor
+    used, converge = [], rt.refinement.converge
+    rt.refinement.converge = lambda errors, evaluate, bound, *a, **kw: used.append(bound) or converge(
+        errors, evaluate, bound, *a, **kw)
+    frame = rt.update()
+    assert used and set(used) == {floor}
+    assert frame.stats["error_bound"] == max(floor, frame.stats["bound_floor"])
+    plain = Runtime(store, device="cpu", error_bound=0.05)  # no budget: no floor, the set bound kept
+    plain.set_error_bound(0.001)
+    assert plain.error_bound == 0.001
+
+
 def test_cli_frames_takes_a_frame_budget(bunny_bake, capsys):
     """`lodprt frames --frame-ms` reports the budget and the floor per frame; a bad budget is a one-line error."""
     from lodprt.cli.main import main

@@ -44,6 +44,12 @@ def test_cli_compare(cut_store, tmp_path, capsys):
     assert "PSNR" in capsys.readouterr().out and out.is_file()
     assert main(args) == 2
     assert "already exists" in capsys.readouterr().err
+    # compare draws the full-resolution frame beside the cut anyway: --full is no option of it (it was taken and
+    # ignored)
+    with pytest.raises(SystemExit) as stop:
+        main([*args[:-2], "--full", "-o", str(tmp_path / "other.png")])
+    assert stop.value.code == 2 and "unrecognized arguments: --full" in capsys.readouterr().err
+    assert not (tmp_path / "other.png").exists()
 
 
 LIGHTS = [(0.05, 0.3, 0.1)]

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from lodprt.cli.main import main
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, StoreError
 from lodprt.model.scene import Material, assemble_scene
 from lodprt.precompute.bake import bake
 from lodprt.store import codecs
@@ -348,3 +348,20 @@ def test_cli_bake_compress(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "--compress" in err and err.count("\n") == 0
     assert not (tmp_path / "bad.zarr").exists()
+
+
+def test_a_damaged_codec_array_is_one_line_naming_it(stores, compressed, tmp_path):
+    """A chunk file of the store-level CPCA basis garbled: decoding a sample says which array is damaged in one
+    line, as every damaged read does (it was wrapped as 'cannot decode: StoreError("...")')."""
+    import shutil
+
+    cpca = next(path for codec, path in compressed.items() if codec.startswith("cpca"))
+    copy = tmp_path / "c.zarr"
+    shutil.copytree(cpca, copy)
+    chunk = next(p for p in sorted((copy / "codec" / "basis").rglob("*")) if p.is_file() and p.name != "zarr.json")
+    chunk.write_bytes(b"garbled garbled")
+    with pytest.raises(StoreError) as err:
+        open_store(copy).sample(0)
+    text = str(err.value)
+    assert text.startswith(f"{copy}: array 'codec/basis' is damaged, a chunk cannot be read (") and "\n" not in text
+    assert "cannot decode" not in text and "StoreError(" not in text, text

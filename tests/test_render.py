@@ -245,6 +245,16 @@ def test_shadow_is_where_ray_casting_puts_it(bunny_store, renderer):
     assert (dark & blocked).sum() / (dark | blocked).sum() >= 0.75
 
 
+def test_full_frame_takes_a_sample_or_lights_not_both(bunny_store):
+    """Both a sample and lights are refused (the lights were dropped); colours with a sample light that sample."""
+    with pytest.raises(LodprtError, match="sample 0 and lights"):
+        full_frame(bunny_store, CAM, sample=0, lights=[(0.05, 0.35, 0.05)])
+    frame = full_frame(bunny_store, CAM, sample=0, colors=[(2.0, 1.0, 0.5)])
+    np.testing.assert_array_equal(frame.lights, bunny_store.light_positions[:1])
+    want = bunny_store.coefficients(0)[frame.vertex_ids] * np.array([2.0, 1.0, 0.5])[None, :, None]
+    np.testing.assert_allclose(frame.coefficients, want, rtol=1e-6)
+
+
 def test_wireframe_and_light_markers_appear(bunny_store, renderer):
     """Wireframe edges show in the wire colour only when asked; a light marker covers the light's pixel."""
     cam = Camera(eye=(0.0, 0.45, 0.7), target=(0.0, 0.15, 0.0), fov=45.0, width=200, height=160)

@@ -459,6 +459,43 @@ def test_bad_settings_are_refused(store, rt):
         Runtime(store).update()
 
 
+@pytest.mark.parametrize("field, bad", [
+    ("near", 0.0), ("near", -1.0), ("near", float("nan")), ("near", "0.1"), ("far", float("nan")),
+    ("far", float("inf")), ("far", 0.0), ("fov", "45"), ("fov", True), ("fov", None),
+])
+def test_bad_camera_planes_and_fov_are_refused(rt, field, bad):
+    """A lone near of 0, below 0 or NaN, a non-finite far and a fov that is no number (a string, a bool) are
+    refused where Camera checks its fields, naming the field; Runtime.set_camera the same."""
+    with pytest.raises(LodprtError, match=f"camera {field}"):
+        Camera(eye=(0, 0, 1), target=(0, 0, 0), **{field: bad})
+    with pytest.raises(LodprtError, match=f"camera {field}"):
+        rt.set_camera((0, 0.3, 0.6), (0, 0.1, 0), **{field: bad})
+
+
+def test_good_camera_planes_give_a_finite_frustum(rt):
+    """A lone near or far, and numpy numbers for the fov, give finite clip planes (the frustum the cut culls with)."""
+    for kw in (dict(near=1e-3), dict(far=50.0), dict(near=0.01, far=2.0), dict(fov=np.float32(45.0)),
+               dict(fov=np.int64(60))):
+        cam = Camera(eye=(0, 0.3, 0.6), target=(0, 0.1, 0), **kw)
+        vp = view_projection(cam, rt.bounds)
+        assert np.isfinite(vp).all() and np.isfinite(clip_planes(vp)).all(), kw
+
+
+@pytest.mark.parametrize("bad", [0, -3, 1.9, float("nan"), "2", True])
+def test_bad_max_passes_is_refused_at_construction_and_update(store, rt, bad):
+    """max_passes is a whole number >= 1 both where the Runtime is made and per update (nothing truncated)."""
+    from lodprt.runtime.settings import check_max_passes
+
+    with pytest.raises(LodprtError, match="max_passes"):
+        Runtime(store, device="cpu", max_passes=bad)
+    rt.set_camera(orbit_camera(rt, 0.3))
+    frame = rt.errors.frame
+    with pytest.raises(LodprtError, match="max_passes"):
+        rt.update(max_passes=bad)
+    assert rt.errors.frame == frame  # refused before the frame began
+    assert check_max_passes(3.0) == 3 and type(check_max_passes(np.int64(2))) is int
+
+
 def test_cli_radiance_with_lights(store, bunny_bake, tmp_path, capsys):
     """`lodprt radiance --light` writes the interpolated, completed radiance; bad lights give one-line errors."""
     from lodprt.cli.main import main

@@ -464,6 +464,20 @@ def test_obj_vertex_index_zero_is_refused_naming_the_line(tmp_path):
             load_mesh(write(tmp_path, "bad.obj", text + bad))
 
 
+def test_the_log_names_the_reader_that_read_the_obj(tmp_path, caplog):
+    """A plain OBJ is read by trimesh and the log says so; one whose vertices trimesh copied per material is read
+    by pymeshlab, and the log gives trimesh's count beside the file's (every OBJ was logged as read by pymeshlab,
+    with pymeshlab's count as trimesh's)."""
+    plain = write(tmp_path, "plain.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with caplog.at_level("INFO", logger="lodprt.model.meshio"):
+        load_mesh(plain)
+    assert "read with trimesh: 3 vertices, 1 triangles" in caplog.text, caplog.text
+    caplog.clear()
+    with caplog.at_level("INFO", logger="lodprt.model.meshio"):
+        load_mesh(write(tmp_path, "uv.obj", MATERIALS_UV_OBJ))
+    assert "read with pymeshlab (trimesh made 7 vertices of the file's 4): 4 vertices" in caplog.text, caplog.text
+
+
 def test_empty_ply_is_called_empty_not_a_point_cloud(tmp_path):
     """A PLY of no vertices and no faces is an empty mesh (it was called a point cloud)."""
     head = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"

@@ -3,6 +3,7 @@ array, no traceback; a full disk leaves nothing behind and the earlier store at 
 
 import errno
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -118,21 +119,40 @@ def test_damaged_chunk_is_one_line_naming_store_array_and_info(tmp_path, spot_sc
     assert open_store(out).sample(0)[0].size > 0  # the other samples still read
 
 
-@pytest.mark.parametrize("damage", ["garbled metadata", "lost metadata"])
-def test_info_on_a_store_whose_array_metadata_is_damaged(tmp_path, spot_scene, capsys, damage):
-    """An array's zarr.json garbled or gone (the array cannot even be opened) is damage that info names in one
-    line and exits 1 for (it raised JSONDecodeError or KeyError with a traceback)."""
+@pytest.mark.parametrize("damage", ["garbled metadata", "lost metadata", "lost sample metadata", "lost array",
+                                    "lost hierarchy"])
+def test_info_names_a_store_part_whose_metadata_or_folder_is_gone(tmp_path, spot_scene, capsys, damage):
+    """An array's zarr.json garbled or gone (zarr cannot open the array, or no longer sees it), a required array
+    gone whole, or the hierarchy/ group of a store baked with one: info names the part in one line and exits 1,
+    --verify too, and a run that needs the part says the store is damaged. (They raised JSONDecodeError or KeyError
+    with a traceback; a lost sample array's metadata and a lost hierarchy were called undamaged, exit 0, and the
+    store without its hierarchy was said to be baked with --no-hierarchy.)"""
     out = tmp_path / "out.zarr"
-    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
-    meta = out / ("samples/00001/coefficients" if damage == "garbled metadata" else "scene/positions") / "zarr.json"
+    assert main(["bake", str(spot_scene), "-o", str(out), "--device", "cpu", "--sh-order", "2"]) == 0
+    part, named = {"garbled metadata": ("samples/00001/coefficients", "'samples/00001/coefficients/zarr.json' "
+                                        "cannot be read"),
+                   "lost metadata": ("scene/positions", "'scene/positions': its zarr.json is missing"),
+                   "lost sample metadata": ("samples/00001/vertex_ids", "'samples/00001/vertex_ids': its zarr.json "
+                                            "is missing"),
+                   "lost array": ("scene/normals", "'scene/normals' is missing"),
+                   "lost hierarchy": ("hierarchy", "'hierarchy/parent' is missing")}[damage]
     if damage == "garbled metadata":
-        meta.write_text("{bad")
+        (out / part / "zarr.json").write_text("{bad")
+    elif damage.startswith("lost") and "metadata" in damage:
+        (out / part / "zarr.json").unlink()
     else:
-        meta.unlink()
+        shutil.rmtree(out / part)
+    for verify in ([], ["--verify"]):
+        capsys.readouterr()
+        assert main(["info", str(out), *verify]) == 1, verify
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and f"{out}: damaged: {named}" in err and "bake it again" in err, err
+    if damage == "lost hierarchy":
+        with pytest.raises(StoreError, match=r"'hierarchy' is missing: the store is damaged"):
+            open_store(out).hierarchy()
     capsys.readouterr()
-    assert main(["info", str(out)]) == 1
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and f"{out}: damaged: cannot be read whole: " in err and "bake it again" in err, err
+    assert main(["info", str(out), "--json"]) == 1
+    assert named in " ".join(json.loads(capsys.readouterr().out)["damage"])
 
 
 def test_info_verify_of_an_intact_store_and_of_a_transfer_store(tmp_path, spot_scene, capsys):
@@ -186,8 +206,9 @@ def test_a_hierarchy_with_a_broken_link_is_refused_naming_store_and_node(tmp_pat
 
 
 def test_a_lost_sample_group_or_attribute_is_named(spot_scene, tmp_path, capsys):
-    """A sample group deleted, a sample's statistics or the lights' intensity attribute removed: info, compress,
-    radiance and export say which group or attribute is gone (they raised KeyError), and bake --resume or
+    """A sample group deleted, a sample's statistics or the lights' intensity attribute removed: info (damage,
+    status 1), compress, radiance and export say which group or attribute is gone (they raised KeyError), and bake
+    --resume or
     --add-samples call the store damaged, leaving no partial folder behind (one blocked the next bake)."""
     store = tmp_path / "s.zarr"
     assert main(["bake", str(spot_scene), "-o", str(store), *FAST]) == 0
@@ -198,7 +219,9 @@ def test_a_lost_sample_group_or_attribute_is_named(spot_scene, tmp_path, capsys)
             (lost / name).parent.mkdir(parents=True, exist_ok=True)
             (lost / name).write_bytes(data)
     capsys.readouterr()
-    for argv in (["info", str(lost)], ["compress", str(lost), "-o", str(tmp_path / "c.zarr"), "--codec", "f16"],
+    assert main(["info", str(lost)]) == 1  # info reports the damage (status 1), the others refuse the store (2)
+    assert f"{lost}: damaged: 'samples/00001' is missing" in capsys.readouterr().err
+    for argv in (["compress", str(lost), "-o", str(tmp_path / "c.zarr"), "--codec", "f16"],
                  ["radiance", str(lost), "--sample", "1", "--eye", "0", "1", "3", "-o", str(tmp_path / "r.npy")]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
@@ -220,3 +243,22 @@ def test_a_lost_sample_group_or_attribute_is_named(spot_scene, tmp_path, capsys)
         assert main(argv) == 2
         want = "attribute(s) vertices_kept missing" if key == "vertices_kept" else "lights: attribute(s) intensity missing"
         assert want in capsys.readouterr().err
+
+
+def test_a_store_under_a_file_is_refused_in_one_line(tmp_path, spot_scene, capsys):
+    """-o FILE/x.zarr (a parent that is a file): bake, bake --compress and compress say so in one line, status 2,
+    and leave nothing (making the partial folder raised NotADirectoryError with a traceback)."""
+    store = tmp_path / "s.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(store), *FAST]) == 0
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    out = afile / "x.zarr"
+    for argv in (["bake", str(spot_scene), "-o", str(out), *FAST], ["bake", str(spot_scene), "-o", str(out), *FAST,
+                 "--compress", "f16"], ["compress", str(store), "-o", str(out), "--codec", "f16"]):
+        capsys.readouterr()
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert f"{out}: the folder {afile} is a file, not a folder" in err and "Traceback" not in err, err
+        assert len([ln for ln in err.splitlines() if "error" in ln]) == 1, err
+    assert afile.read_text() == "mine" and sorted(p.name for p in tmp_path.iterdir()) == ["afile", "s.zarr",
+                                                                                         "spot.toml"]

@@ -20,14 +20,16 @@ def register(sub) -> None:
     _add_view(sub)
 
 
-def _add_view_args(p, output: str | None, *, required: bool = True) -> None:
-    """The arguments of the display commands: store, lights, camera, view cut, drawing, output."""
+def _add_view_args(p, output: str | None, *, required: bool = True, full: bool = True) -> None:
+    """The arguments of the display commands: store, lights, camera, view cut, drawing (``full``: with --full,
+    LOD off), output."""
     cli_args.add_store(p)
     cli_args.add_light(p, required=required)
     cli_args.add_colors(p)
     cli_args.add_camera(p, eye_required=required, up=True)
     cli_args.add_view_cut(p)
-    p.add_argument("--full", action="store_true", help="LOD off: draw the full-resolution mesh")
+    if full:
+        p.add_argument("--full", action="store_true", help="LOD off: draw the full-resolution mesh")
     p.add_argument("--wireframe", action="store_true", help="overlay the triangles of the cut")
     p.add_argument("--per-vertex", action="store_true", help="radiance per vertex, interpolated (default: per fragment from interpolated SH)")
     p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops (tone mapping, default 0)")
@@ -82,7 +84,7 @@ def _add_compare(sub) -> None:
         "their per-pixel difference in false colour with its scale, side by side in one PNG (fig.exr: the "
         "linear radiance of the two frames and their absolute difference side by side, OpenEXR float32 RGB).",
     )
-    _add_view_args(cp, "fig.png|fig.exr")
+    _add_view_args(cp, "fig.png|fig.exr", full=False)  # it draws the full-resolution frame beside the cut anyway
     cp.add_argument("--scale", type=float, default=None, metavar="S",
                     help="|difference| / white at the top of the colour scale (default: its 99th percentile)")
     cp.set_defaults(handler=cmd_compare)

@@ -6,7 +6,7 @@ import json
 import sys
 
 from lodprt.cli import args as cli_args
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, StoreError
 
 
 def register(sub) -> None:
@@ -50,19 +50,21 @@ def _add_radiance(sub) -> None:
 def cmd_info(args) -> int:
     from lodprt.store.bake_store import open_store
 
+    other = other_store(args.store)
+    if other is not None:  # a transfer, volume or neighbourhood store: what it holds, as it is stored
+        return print_summary(other.summary(verify=args.verify), args.json)
+    store = open_store(args.store)
     try:
-        other = other_store(args.store)
-        if other is not None:  # a transfer, volume or neighbourhood store: what it holds, as it is stored
-            return print_summary(other.summary(verify=args.verify), args.json)
-        info = open_store(args.store).info(verify=args.verify)
-    except LodprtError:
-        raise
-    except (KeyError, ValueError, OSError) as exc:  # a part its bake wrote is gone or garbled (metadata included)
-        detail = " ".join(str(exc).split())[:200]
-        return report_damage(args.store, [f"cannot be read whole: {type(exc).__name__}: {detail}"])
+        info = store.info(verify=args.verify)
+    except StoreError:  # a part the summary reads is gone or garbled: what is damaged says which
+        if not (found := store.damage(verify=args.verify)):
+            raise
+        if args.json:  # no summary: what is damaged only
+            print(json.dumps({"store": str(args.store), "damage": found}, indent=2))
+        return report_damage(args.store, found)
     if args.json:
         print(json.dumps(info, indent=2))
-        return 1 if info["damage"] else 0
+        return report_damage(args.store, info["damage"])
     mode = info["mode"] + (f", threshold {info['threshold_deg']} deg" if info.get("threshold_deg") is not None else "")
     print(f"{args.store}: lodprt store v{info['format_version']} ({mode}) from {info['source']}")
     print(f"  vertices {info['vertices']:,}, triangles {info['faces']:,}")
@@ -145,7 +147,7 @@ def print_summary(summary: dict, as_json: bool) -> int:
     """``lodprt info`` of a transfer, volume or neighbourhood store (``FormatStore.summary``)."""
     if as_json:
         print(json.dumps(summary, indent=2))
-        return 1 if summary["damage"] else 0
+        return report_damage(summary["store"], summary["damage"])
     print(f"{summary['store']}: {summary['kind']} v{summary['format_version']} (baked by {summary['baked_by']}; "
           f"{summary['bytes_on_disk'] / 1024:,.0f} KiB on disk)")
     for k, v in summary["attrs"].items():

@@ -92,18 +92,18 @@ def load_mesh(
         raise SceneError(f"{path}: up: expected one of {', '.join(map(repr, UP_AXES))}, got {up!r}")
     require_file(path, "mesh")
     data = decompressed(path)
-    verts, faces, points = _read_trimesh(path, data)
     obj = suffix_of(path) == ".obj"
-    text = (path.read_bytes() if data is None else data) if obj else None  # the OBJ's bytes, read once more
+    text = path.read_bytes() if obj and data is None else data  # an OBJ read once: trimesh and the two scans
+    verts, faces, points = _read_trimesh(path, text)
     reader = "trimesh"
     if len(faces) == 0:
         verts, faces = _fallback(path, verts, points, data)
         reader = "pymeshlab (trimesh found no faces)"
-    elif obj and len(verts) != (n := obj_vertex_count(path, text)):
-        verts, faces = _obj_by_pymeshlab(path, data, len(verts), n)
+    elif obj and (made := len(verts)) != (n := obj_vertex_count(text)):
+        verts, faces = _obj_by_pymeshlab(path, data, made, n)
+        reader = f"pymeshlab (trimesh made {made} vertices of the file's {n})"
     if obj:
         refuse_obj_index_zero(path, text)
-        reader = f"pymeshlab (trimesh made {len(verts)} vertices of the file's {n})"
     log.info("%s: read with %s: %d vertices, %d triangles", path, reader, len(verts), len(faces))
     _check_coordinates(path, verts, np.inf, "in the file")
     if faces.min() < 0 or faces.max() >= len(verts):
@@ -167,8 +167,9 @@ def _check_coordinates(path: Path, verts: np.ndarray, limit: float, when: str) -
 
 
 def _read_trimesh(path: Path, data: bytes | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices of the meshes, their faces, the vertices trimesh read as point clouds); ``data``: the decompressed
-    bytes of a compressed file, read as its inner suffix's format."""
+    """(vertices of the meshes, their faces, the vertices trimesh read as point clouds); ``data``: the file's bytes
+    (decompressed where it is compressed), read as its inner suffix's format, with files it names (an OBJ's
+    ``mtllib``) looked up beside ``path``."""
     import trimesh
 
     try:
@@ -178,7 +179,8 @@ def _read_trimesh(path: Path, data: bytes | None) -> tuple[np.ndarray, np.ndarra
                 loaded = trimesh.load_scene(str(path), process=False, maintain_order=True)
             else:
                 loaded = trimesh.load_scene(io.BytesIO(data), file_type=suffix_of(path)[1:], process=False,
-                                            maintain_order=True)
+                                            maintain_order=True,
+                                            resolver=trimesh.resolvers.FilePathResolver(str(path.parent)))
             mesh = loaded.to_mesh()
     except NotImplementedError as exc:  # trimesh knows no reader for the suffix
         raise SceneError(f"{path}: not a file type lodprt reads ({suffix_of(path) or 'no suffix'}): a scene file ends "
@@ -202,20 +204,19 @@ def suffix_of(path: Path) -> str:
     return Path(path.stem).suffix.lower() if suffix in COMPRESSED else suffix
 
 
-def obj_vertex_count(path: Path, data: bytes | None) -> int:
-    """How many ``v`` lines (vertex positions) the OBJ file at ``path`` (or ``data``, its decompressed bytes) has."""
+def obj_vertex_count(text: bytes) -> int:
+    """How many ``v`` lines (vertex positions) the OBJ file's bytes ``text`` have."""
     import re
 
-    text = path.read_bytes() if data is None else data
     return len(re.findall(rb"(?m)^[ \t]*v[ \t]", text))
 
 
-def refuse_obj_index_zero(path: Path, data: bytes | None) -> None:
-    """SceneError naming the line of the first ``f`` line with a vertex index 0: OBJ counts vertices from 1 (and
-    from -1 backwards), so 0 names none, and the readers silently took another vertex for it."""
+def refuse_obj_index_zero(path: Path, text: bytes) -> None:
+    """SceneError naming the line of the first ``f`` line with a vertex index 0 in ``text``, the bytes of the OBJ
+    file at ``path``: OBJ counts vertices from 1 (and from -1 backwards), so 0 names none, and the readers silently
+    took another vertex for it."""
     import re
 
-    text = path.read_bytes() if data is None else data
     for found in re.finditer(rb"[ \t][+]?0+(?=[/ \t\r\n]|$)", text):  # a token 0: on an f line, an index
         start = text.rfind(b"\n", 0, found.start()) + 1
         if text[start:found.start() + 1].lstrip(b" \t")[:2] not in (b"f ", b"f\t"):
@@ -302,12 +303,12 @@ np.save(sys.argv[3], np.ascontiguousarray(m.face_matrix(), dtype=np.int64))
 
 
 def _read_pymeshlab(path: Path, data: bytes | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices, faces) as pymeshlab reads ``path`` (or ``data``, its decompressed bytes, written to a temporary
+    """(vertices, faces) as pymeshlab reads ``path`` (or ``data``, its bytes, decompressed, written to a temporary
     file with the inner suffix), read in a child process (module docstring)."""
     with tempfile.TemporaryDirectory(prefix="lodprt-meshio-") as tmp:
         vfile, ffile = os.path.join(tmp, "v.npy"), os.path.join(tmp, "f.npy")
         if data is not None:
-            path = Path(tmp) / f"mesh{Path(path.stem).suffix}"
+            path = Path(tmp) / f"mesh{suffix_of(path)}"
             path.write_bytes(data)
         try:
             run = subprocess.run(

@@ -10,9 +10,9 @@
     B-2   frame-time budget F ms (Hoppe 1997's regulation of the frame rate, on the bound): after a frame in motion
           that made no estimate (E-1) and no pins (E-5), m = the mean of its time and the last such frame's; over F,
           the floor becomes 1.25 max(floor, bound), at most the steering's highest bound; under 0.8 F, floor / 1.1
-          (0 once under the lowest). The bound is never under the floor: E-4's bound, a fixed bound and B-1's all
-          give way to it, so the frames in motion are held near F where a coarser cut can do it, and E-3's estimate
-          says what that costs
+          (0 once under the lowest). The bound is never under the floor: E-4's bound, a fixed bound (one set by
+          ``set_error_bound`` too) and B-1's all give way to it, so the frames in motion are held near F where a
+          coarser cut can do it, and E-3's estimate says what that costs
 
 The time B-2 reads is the frame's own work (cut, triangulation, relighting), measured on the machine that runs it:
 a frame that estimates its error (every 4 to 8 frames in motion) costs more, and no bound makes that cost less.

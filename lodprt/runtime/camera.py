@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import numbers
 
 import numpy as np
 
@@ -44,8 +45,8 @@ class Camera:
             object.__setattr__(self, name, tuple(float(x) for x in v))
         if not np.linalg.norm(self.up) > 0:  # no direction: refused, not replaced as a parallel one is (view_up)
             raise LodprtError(f"camera up: {list(self.up)} has no direction; give a non-zero vector (default 0 1 0)")
-        if not 0.0 < float(self.fov) < 180.0:
-            raise LodprtError(f"camera fov: {self.fov} degrees; must lie strictly between 0 and 180")
+        if not (is_number(self.fov) and 0.0 < float(self.fov) < 180.0):  # "45" or True is no angle
+            raise LodprtError(f"camera fov: {self.fov!r} degrees; must be a number strictly between 0 and 180")
         size = []
         for name in ("width", "height"):  # whole pixels: 320.0 is 320, 320.5 or "320" is refused
             v = getattr(self, name)
@@ -55,8 +56,17 @@ class Camera:
             size.append(int(v))
         object.__setattr__(self, "width", size[0])
         object.__setattr__(self, "height", size[1])
-        if self.near is not None and self.far is not None and not 0.0 < self.near < self.far:
+        for name in ("near", "far"):  # each alone too: a near of 0 or a NaN far leaves no finite projection
+            v = getattr(self, name)
+            if v is not None and not (is_number(v) and math.isfinite(v) and v > 0):
+                raise LodprtError(f"camera {name}: {v!r}; must be a finite number > 0 (None: from the scene's bounds)")
+        if self.near is not None and self.far is not None and not self.near < self.far:
             raise LodprtError(f"camera near/far: {self.near}, {self.far}; need 0 < near < far")
+
+
+def is_number(value) -> bool:
+    """A real number (numpy's included), not a bool or a string."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def clip_planes(view_proj: np.ndarray) -> np.ndarray:

@@ -128,6 +128,11 @@ def full_frame(store, camera, *, lights=None, colors=None, sample: int | None = 
     ids = np.unique(faces.ravel()).astype(np.int32)
     remap = np.full(store.num_vertices, -1, np.int64)
     remap[ids] = np.arange(len(ids))
+    if sample is not None and lights is not None:  # one or the other: the lights were dropped unseen
+        from lodprt.errors import LodprtError
+
+        raise LodprtError(f"full_frame: sample {sample!r} and lights given; give one (sample: the light at that "
+                          "sample, lights: positions interpolated)")
     if sample is not None:
         store.check_sample(sample)
         lights, colors = check_lights(store.light_positions[sample], colors, store.intensity)

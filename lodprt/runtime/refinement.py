@@ -79,6 +79,10 @@ class CutRefinement:
         self.extra_nodes: np.ndarray | None = None  # where ``set_extra`` last wrote it
         #: (N,) nodes kept split whatever their error (E-5: where a still frame's measured error is), and how many
         self.pinned, self.pins = np.zeros(h.num_nodes, bool), 0
+        #: (N,) M-7: the error each node was split for at this view, these lights and this bound (0: none); the
+        #: coarsen test reads at least it. ``split_nodes``: where it is set (cleared there only: a moving camera
+        #: forgets every frame, and a memset of every node would cost a big scene's frame)
+        self.split_for, self.split_nodes, self.split_bound = np.zeros(h.num_nodes, np.float32), [], None
 
     def reset(self, cut) -> None:
         """Start again from ``cut`` (LOD switched): the first frame converges in full."""
@@ -88,6 +92,13 @@ class CutRefinement:
         self.fails[:] = 0
         self.retry_at[:] = 0
         self.pin(None)
+
+    def forget_splits(self) -> None:
+        """M-7: the camera, the lights or the bound moved (or E-5 starts again): the errors the nodes were split
+        for no longer hold."""
+        if self.split_nodes:
+            self.split_for[np.concatenate(self.split_nodes)] = 0.0
+            self.split_nodes = []
 
     def set_extra(self, nodes: np.ndarray, err: np.ndarray) -> None:
         """``extra`` this frame: ``err`` at ``nodes``, 0 elsewhere (only the last frame's nodes are cleared)."""
@@ -102,6 +113,7 @@ class CutRefinement:
         """E-5: keep ``nodes`` split from now on (None: pin none any more); the cut moves again."""
         if nodes is None:
             self.pinned[:] = False
+            self.forget_splits()
         else:
             self.pinned[nodes] = True
         self.pins = int(self.pinned.sum()) if nodes is not None else 0
@@ -126,8 +138,13 @@ class CutRefinement:
         culled, err = errors.lookup(nodes, bound, evaluate, self.converged_once)
         if self.extra is not None:  # M-6: a node at the actual light's shadow edge refines, its parent stays split
             err = np.maximum(err, self.extra[nodes])
-        err = np.where(self.pinned[nodes], np.inf, err)  # E-5: a pinned node refines, and never collapses
+        if bound != self.split_bound:  # M-7: another bound (B-1, B-2, E-4, E-5), other decisions
+            self.forget_splits()
+            self.split_bound = bound
         k, frame = len(rc), errors.frame
+        own = err[:k]  # the refine candidates' own errors (pins aside): what a split is made for (M-7)
+        err = np.concatenate([own, np.maximum(err[k:], self.split_for[cc])])  # M-7: at least what it was split for
+        err = np.where(self.pinned[nodes], np.inf, err)  # E-5: a pinned node refines, and never collapses
         want_refine = (~culled[:k] | self.pinned[rc]) & (err[:k] > bound)  # E-5: a pinned node's pixels were seen
         want_coarsen = (culled[k:] & ~self.pinned[cc]) | (err[k:] * HYSTERESIS <= bound)
         refined = coarsened = touched = 0
@@ -147,9 +164,9 @@ class CutRefinement:
             self.fails[todo] = np.where(done | ~big, 0, np.minimum(self.fails[todo] + 1, 5))
             self.retry_at[todo] = frame + np.where(done | ~big, 0, 2 ** self.fails[todo].astype(np.int64))
             coarsened += int(done.sum())
-        split = rc[want_refine]
-        split = split[np.argsort(-err[:k][want_refine], kind="stable")]
-        split = split[cut.active[split]]
+        order = np.argsort(-err[:k][want_refine], kind="stable")
+        split, split_err = rc[want_refine][order], own[want_refine][order]
+        split, split_err = split[cut.active[split]], split_err[cut.active[split]]
         touched += len(split)
         if len(split):  # largest error first; blocked ones forced, their coarser blockers split first
             # once the cut has converged a pass makes at most FRAME_SPLITS splits (the rest wait a frame), so that
@@ -158,6 +175,9 @@ class CutRefinement:
                                       device=self.device)
             refined += n
             touched += max(n - len(split), 0)
+            gone = ~cut.active[split]  # M-7: split now (a forced blocker's split is not recorded: not for its error)
+            self.split_for[split[gone]] = np.maximum(self.split_for[split[gone]], split_err[gone])
+            self.split_nodes.append(split[gone])
         return refined, coarsened, touched
 
     def converge(self, errors: ErrorCache, evaluate, bound: float, max_passes: int | None,

@@ -34,6 +34,7 @@ from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, 
 from lodprt.runtime.device_inputs import host_array
 from lodprt.runtime.frames import Frame
 from lodprt.runtime.refinement import HYSTERESIS, CutRefinement, ErrorCache
+from lodprt.runtime.settings import check_bound, check_max_passes
 from lodprt.runtime.direct_light import DEFAULT_INTERPOLATION
 from lodprt.runtime.relighting import Relighting
 from lodprt.runtime.samples import default_white
@@ -116,9 +117,7 @@ class Runtime:
             else np.zeros((2, 3))
         self.budgets = FrameBudgets(triangle_budget, frame_ms, lowest=frame_error.BOUND_RANGE[0],
                                     highest=frame_error.BOUND_RANGE[1])  # B-1, B-2
-        if int(max_passes) < 1:
-            raise LodprtError(f"max_passes {max_passes}: must be >= 1")
-        self.max_passes = int(max_passes)
+        self.max_passes = check_max_passes(max_passes)
         self.lod = bool(lod)
         self.order = store.sh_order
         # lights, their samples (T-15 on demand, SampleCache) and the interpolation (T-12 or M-1..M-4)
@@ -290,9 +289,9 @@ class Runtime:
         return getattr(self.criterion, "target_psnr", None)
 
     def set_error_bound(self, error_bound: float, alpha: float | None = None) -> None:
-        """The criterion's error bound (>= 0) and, when given, alpha in [0, 1] (T-14's weight of e_geo; checked
-        and unread by a criterion without one)."""
-        new = self.criterion.with_bound(error_bound)
+        """The criterion's error bound (>= 0; B-2's floor when under it, as every bound) and, when given, alpha in
+        [0, 1] (T-14's weight of e_geo; checked and unread by a criterion without one)."""
+        new = self.criterion.with_bound(self.budgets.limit(check_bound(error_bound)))  # B-2: never under the floor
         self.criterion = new if alpha is None else new.with_alpha(alpha)
         self.refinement.dirty = self.errors.refresh_all = True
 
@@ -314,6 +313,7 @@ class Runtime:
         if self.camera is None or not (np.array_equal(lit.positions, self.light_positions)
                                        and np.array_equal(lit.colors, self.light_colors)):
             self.schedule.moved = True
+            self.refinement.forget_splits()  # M-7
         self.light_positions, self.light_colors, self.lights_clamped = lit.positions, lit.colors, lit.clamped
         self.sample_weights, self.used_samples, self.used_slots = W, lit.used_samples, lit.used_slots
 
@@ -327,6 +327,8 @@ class Runtime:
                                                          up=up, fov=fov, width=width, height=height, near=near, far=far))
         self.refinement.dirty = True
         self.schedule.moved = self.schedule.moved or self.camera != old
+        if self.camera != old:
+            self.refinement.forget_splits()  # M-7
         if old is None or camera_jump(old, self.camera, JUMP):
             self.errors.refresh_all = self.view_jumped = True
         self.vp = view_projection(self.camera, self.bounds)
@@ -428,6 +430,7 @@ class Runtime:
         """Move the cut for the current camera and lights, triangulate it, relight it: a ``Frame``."""
         if self.camera is None:
             raise LodprtError("no camera: call set_camera(eye, target, ...) before update()")
+        max_passes = None if max_passes is None else check_max_passes(max_passes)
         t0 = time.perf_counter()
         self.errors.frame += 1
         # E-5 on the first frame and a still one, E-4 on E-2's grid in motion: ``frame_error.EstimateSchedule``

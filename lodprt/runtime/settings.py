@@ -7,13 +7,14 @@ must be (a value that is no number at all included: never a ValueError from deep
     target_psnr      in (0, 200] dB, or "off"     (E-3's target; ``lodprt.runtime.frame_error``)
     frame_ms         in (0, 1e6] ms               (B-2's budget; ``lodprt.runtime.budgets``)
     triangle_budget  a whole number >= 1          (B-1's budget)
+    max_passes       a whole number >= 1          (refinement passes a frame; ``Runtime`` and its ``update``)
 """
 
 from __future__ import annotations
 
 import math
 
-from lodprt.errors import LodprtError
+from lodprt.errors import LodprtError, is_whole
 
 
 def checked_number(value, field: str, must: str, *, low: float, high: float = math.inf,
@@ -64,3 +65,10 @@ def check_triangle_budget(value) -> int | None:
     if n != math.floor(n):
         raise LodprtError(f"triangle_budget {value}: must {must}")
     return int(n)
+
+
+def check_max_passes(value) -> int:
+    """``max_passes`` as an int >= 1 (a whole number: 1.9 passes is refused, not truncated; NaN or "2" too)."""
+    if not is_whole(value, 1):
+        raise LodprtError(f"max_passes {value!r}: must be a whole number of passes >= 1")
+    return int(value)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import LodprtError, StoreError
-from lodprt.store.reader import damage, folder_bytes, read_array
+from lodprt.store.reader import brief, damage, folder_bytes, read_array
 from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_format
 
 log = logging.getLogger(__name__)
@@ -88,7 +88,7 @@ class Store:
 
     @property
     def num_vertices(self) -> int:
-        return int(self.root["scene/positions"].shape[0])
+        return int(self.node("scene/positions").shape[0])
 
     @property
     def referenced(self) -> np.ndarray:
@@ -116,18 +116,18 @@ class Store:
 
     @property
     def num_samples(self) -> int:
-        return int(self.root["lights/positions"].shape[0])
+        return int(self.node("lights/positions").shape[0])
 
     @property
     def light_box(self) -> np.ndarray:
         """(6,) float64 the sampled light region (xmin, ymin, zmin, xmax, ymax, zmax): lights between samples are
         interpolated inside it, clamped into it (or refused) outside."""
-        return np.asarray(self.root["lights"].attrs["box"], np.float64)
+        return np.asarray(self.required_attrs("lights", self.node("lights").attrs, ("box",))["box"], np.float64)
 
     @property
     def intensity(self) -> np.ndarray:
         if "lights/intensity" not in self._cache:  # read once: the run time asks every frame
-            attrs = self.required_attrs("lights", self.root["lights"].attrs, ("intensity",))
+            attrs = self.required_attrs("lights", self.node("lights").attrs, ("intensity",))
             self._cache["lights/intensity"] = np.asarray(attrs["intensity"], dtype=np.float64)
         return self._cache["lights/intensity"].copy()
 
@@ -158,11 +158,17 @@ class Store:
 
     def group(self, k: int):
         """Sample ``k``'s zarr group, or StoreError naming it when the store lost it."""
-        name = sample_group(self.check_sample(k))
+        return self.node(sample_group(self.check_sample(k)))
+
+    def node(self, name: str):
+        """The zarr array or group ``name`` of this store, StoreError calling the store damaged when it is gone or
+        its metadata (``zarr.json``) cannot be read."""
         try:
             return self.root[name]
         except KeyError:
-            raise self.damaged(f"the group '{name}' is missing") from None
+            raise self.damaged(f"'{name}' is missing") from None
+        except Exception as exc:  # noqa: BLE001 -- a garbled zarr.json: JSONDecodeError, TypeError, ...
+            raise self.damaged(f"the metadata of '{name}' cannot be read ({brief(exc)})") from exc
 
     def sample_info(self, k: int) -> dict:
         """Sample ``k``'s recorded statistics, StoreError naming any ``SAMPLE_ATTRS`` missing."""
@@ -235,7 +241,7 @@ class Store:
             object_id=self.read("scene/object_id"),
             referenced=self.referenced.copy(),
             materials=self.materials(),
-            object_names=list(self.root["scene"].attrs.get("object_names", [])),
+            object_names=list(self.node("scene").attrs.get("object_names", [])),
             lights=self.lights(),
             source=str(self.attrs.get("source", self.path)),
         )
@@ -251,12 +257,14 @@ class Store:
         """The baked scene's light grid (``lodprt.model.scene.Lights``)."""
         from lodprt.model.scene import Lights
 
-        a = dict(self.root["lights"].attrs)
+        a = dict(self.node("lights").attrs)
         return Lights(tuple(a["grid"]), tuple(a["box"]), tuple(a["intensity"]), a["falloff"], float(a["radius"]))
 
     @property
     def has_hierarchy(self) -> bool:
-        return "hierarchy" in self.root
+        """The bake built a vertex hierarchy (root attribute ``with_hierarchy``; older stores: a hierarchy/ group).
+        A store that says so and lost the group is damaged (``hierarchy`` raises), not a store without one."""
+        return bool(self.attrs.get("with_hierarchy", "hierarchy" in self.root))
 
     def hierarchy(self):
         """The stored vertex hierarchy (``lodprt.model.hierarchy.Hierarchy``); StoreError when the bake made none."""
@@ -264,7 +272,7 @@ class Store:
 
         if not self.has_hierarchy:
             raise StoreError(f"{self.path}: no hierarchy/ group (baked with --no-hierarchy)")
-        g = self.root["hierarchy"]
+        g = self.node("hierarchy")
         arrays = {name: self.read(f"hierarchy/{name}") for name in Hierarchy.ARRAYS}
         try:
             return Hierarchy.from_arrays(arrays, levels=int(g.attrs.get("levels", 0)),
@@ -306,26 +314,46 @@ class Store:
         )
         out = {k: self.attrs.get(k) for k in keys}
         out["vertices"] = self.num_vertices
-        out["faces"] = int(self.root["scene/faces"].shape[0])
-        out["lights"] = dict(self.root["lights"].attrs)
+        out["faces"] = int(self.node("scene/faces").shape[0])
+        out["lights"] = dict(self.node("lights").attrs)
         out["light_box"] = [float(x) for x in self.light_box]
         out["samples"] = samples
         if self.has_hierarchy:
-            g = self.root["hierarchy"]
-            out["hierarchy_nodes"] = int(g["parent"].shape[0])
-            out["hierarchy_roots"] = int(g.attrs["roots"])
-            out["hierarchy_depth"] = int(g.attrs["depth"])
-            out["hierarchy_seconds"] = float(g.attrs["seconds"])
-            out["hierarchy_method"] = str(g.attrs.get("method", "rounds"))
+            g = self.required_attrs("hierarchy", self.node("hierarchy").attrs, ("roots", "depth", "seconds"))
+            out["hierarchy_nodes"] = int(self.node("hierarchy/parent").shape[0])
+            out["hierarchy_roots"] = int(g["roots"])
+            out["hierarchy_depth"] = int(g["depth"])
+            out["hierarchy_seconds"] = float(g["seconds"])
+            out["hierarchy_method"] = str(g.get("method", "rounds"))
         else:
             out["hierarchy_nodes"] = out["hierarchy_roots"] = out["hierarchy_depth"] = out["hierarchy_seconds"] = None
             out["hierarchy_method"] = None
         out["bytes_total"] = int(sum(s["bytes"] for s in samples))
         out["bytes_on_disk"] = folder_bytes(self.path)
-        out["damage"] = damage(self.root, self.path, all_chunks=bool(self.attrs.get(ALL_CHUNKS)), verify=verify)
+        out["damage"] = self.damage(verify=verify)
         from lodprt.store.codecs import codec_summary  # version 2: codec, store-level bytes, version-1 payload
 
         return {**out, **codec_summary(self)}
+
+    def damage(self, *, verify: bool = False) -> list[str]:
+        """What is damaged in this store, one line each (``reader.damage``: metadata garbled or gone, chunk files
+        missing, and with ``verify`` every array read whole), and every part its bake wrote that is gone."""
+        found = damage(self.root, self.path, all_chunks=bool(self.attrs.get(ALL_CHUNKS)), verify=verify)
+        return found + [f"'{name}' is missing" for name in self.required_parts() if not (self.path / name).is_dir()]
+
+    def required_parts(self) -> list[str]:
+        """The arrays and groups every bake of this store's kind writes: the scene, the lights, each light sample's
+        group (when the light positions can be read) and the hierarchy when the bake built one."""
+        from lodprt.model.hierarchy import Hierarchy
+
+        parts = ["scene/positions", "scene/normals", "scene/faces", "lights/positions"]
+        try:
+            parts += [sample_group(k) for k in range(self.num_samples)]
+        except StoreError:  # the light positions are gone or garbled: named above, the samples cannot be counted
+            pass
+        if self.has_hierarchy:
+            parts += [f"hierarchy/{name}" for name in Hierarchy.ARRAYS]
+        return parts
 
 
 def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:

@@ -401,6 +401,8 @@ def read_sample(store, k: int) -> tuple[np.ndarray, np.ndarray, dict]:
         model = cpca_model(store) if codec.startswith("cpca") else None
         shape = (int(store.attrs["channels"]), int(store.attrs["coefficients_per_vertex"]))
         coeffs = decode_sample(codec, arrays, attrs, model, shape)
+    except StoreError:  # a damaged array it read (the hierarchy's, the codec's): already one line naming it
+        raise
     except (KeyError, IndexError, ValueError) as exc:
         raise StoreError(f"{store.path}: samples/{k:05d} (codec {codec}): cannot decode: {exc!r}") from exc
     return ids, coeffs, cut

@@ -8,6 +8,7 @@ the store and the array, never a zarr traceback nor zeros in place of the lost d
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -19,47 +20,82 @@ from lodprt.store.writer import ALL_CHUNKS
 def read_array(root, path: Path, name: str, *, all_chunks: bool) -> np.ndarray:
     """Array ``name`` of the zarr group ``root`` of the store at ``path``, read whole; ``all_chunks``: the writer
     stored every chunk, so one missing is damage (older stores skipped all-zero chunks, which read as zeros)."""
-    try:
-        arr = root[name]
-    except KeyError as exc:
-        raise StoreError(f"{path}: field '{name}' is missing") from exc
-    hint = f"; inspect the store with: lodprt info {path}"
-    try:
-        value = arr[...]
-        missing = arr.nchunks - arr.nchunks_initialized if all_chunks and arr.size else 0
-    except Exception as exc:  # noqa: BLE001 -- codecs raise RuntimeError, ValueError, ... for a garbled chunk
-        detail = " ".join(str(exc).split())[:200] or type(exc).__name__
-        raise StoreError(f"{path}: array '{name}' is damaged, a chunk cannot be read ({detail}){hint}") from exc
-    if missing:
-        raise StoreError(f"{path}: array '{name}' is damaged, {missing} of its {arr.nchunks} chunk files are "
-                         f"missing{hint}")
+    value, problem = check_array(open_array(root, path, name), all_chunks=all_chunks, read=True)
+    if problem:
+        raise StoreError(f"{path}: array '{name}' is damaged, {problem}; inspect the store with: lodprt info {path}")
     return value
 
 
-def array_names(group, prefix: str = "") -> list[str]:
-    """The paths of every array under the zarr ``group``, sorted, sub-groups included."""
-    names = []
-    for name, member in sorted(group.members()):
-        names.extend([prefix + name] if hasattr(member, "shape") else array_names(member, f"{prefix}{name}/"))
-    return names
+def open_array(root, path: Path, name: str):
+    """The zarr array ``name`` of ``root`` (the store at ``path``), unread; StoreError when it is gone or its
+    metadata (its ``zarr.json``, or a group's above it) cannot be read."""
+    try:
+        return root[name]
+    except KeyError as exc:
+        raise StoreError(f"{path}: field '{name}' is missing") from exc
+    except Exception as exc:  # noqa: BLE001 -- a garbled zarr.json: JSONDecodeError, TypeError, ...
+        raise StoreError(f"{path}: array '{name}' is damaged, its metadata cannot be read ({brief(exc)}); inspect "
+                         f"the store with: lodprt info {path}") from exc
+
+
+def check_array(arr, *, all_chunks: bool, read: bool) -> tuple[np.ndarray | None, str | None]:
+    """(the zarr array ``arr``'s values when ``read``, else None; what is damaged in it, or None): a chunk that
+    cannot be read (``read`` only), or chunk files missing where the writer stored every chunk (``all_chunks``)."""
+    value = None
+    if read:
+        try:
+            value = arr[...]
+        except Exception as exc:  # noqa: BLE001 -- codecs raise RuntimeError, ValueError, ... for a garbled chunk
+            return None, f"a chunk cannot be read ({brief(exc)})"
+    missing = arr.nchunks - arr.nchunks_initialized if all_chunks and arr.size else 0
+    return value, (f"{missing} of its {arr.nchunks} chunk files are missing" if missing else None)
+
+
+def brief(exc: Exception) -> str:
+    """An exception in one line of at most 200 characters (its type when it says nothing)."""
+    return " ".join(str(exc).split())[:200] or type(exc).__name__
+
+
+def walk(path: Path) -> tuple[list[str], list[str]]:
+    """(the paths of every array in the zarr v3 store folder ``path``, sorted; what is damaged in its metadata):
+    read from the folders' ``zarr.json`` files, so a garbled one, or a folder of files that lost its own (zarr no
+    longer sees it), is named rather than raised or skipped."""
+    arrays, problems = [], []
+
+    def visit(folder: Path, prefix: str) -> None:
+        for child in sorted(p for p in folder.iterdir() if p.is_dir()):
+            name, meta = prefix + child.name, child / "zarr.json"
+            if not meta.is_file():
+                if any(f.is_file() for f in child.rglob("*")):
+                    problems.append(f"'{name}': its zarr.json is missing, so its data cannot be found")
+                continue
+            try:
+                kind = json.loads(meta.read_bytes())["node_type"]
+            except (ValueError, KeyError, TypeError) as exc:  # garbled JSON, or JSON without node_type
+                problems.append(f"'{name}/zarr.json' cannot be read ({brief(exc)})")
+                continue
+            if kind == "array":
+                arrays.append(name)
+            elif kind == "group":
+                visit(child, name + "/")
+
+    visit(path, "")
+    return arrays, problems
 
 
 def damage(root, path: Path, *, all_chunks: bool, verify: bool = False) -> list[str]:
-    """What is damaged in the store at ``path`` (zarr group ``root``), one line per array: a chunk file missing
-    from a store whose writer stored every chunk; with ``verify``, every array read whole, so a garbled chunk is
-    found too (``lodprt info --verify``). Empty when nothing is."""
-    found = []
-    for name in array_names(root):
+    """What is damaged in the store at ``path`` (zarr group ``root``), one line per array or folder: metadata that
+    is garbled or gone (``walk``); a chunk file missing from a store whose writer stored every chunk; with
+    ``verify``, every array read whole, so a garbled chunk is found too (``lodprt info --verify``). Empty when
+    nothing is."""
+    arrays, found = walk(path)
+    for name in arrays:
         try:
-            if verify:
-                read_array(root, path, name, all_chunks=all_chunks)
-            else:
-                arr = root[name]
-                missing = arr.nchunks - arr.nchunks_initialized if all_chunks and arr.size else 0
-                if missing:
-                    found.append(f"array '{name}': {missing} of its {arr.nchunks} chunk files are missing")
-        except StoreError as exc:
-            found.append(str(exc).removeprefix(f"{path}: ").split("; inspect the store")[0])
+            problem = check_array(open_array(root, path, name), all_chunks=all_chunks, read=verify)[1]
+        except StoreError as exc:  # metadata zarr reads differently from walk's (not expected)
+            problem = brief(exc)
+        if problem:
+            found.append(f"array '{name}': {problem}")
     return found
 
 
@@ -122,7 +158,7 @@ class FormatStore:
             return v if isinstance(v, (str, int, float, bool, list, tuple, dict)) or v is None else str(v)
 
         arrays = {name: {"shape": list(self.root[name].shape), "dtype": str(self.root[name].dtype)}
-                  for name in array_names(self.root)}
+                  for name in walk(self.path)[0]}
         return {"store": str(self.path), "kind": self.WHAT, "format": self.FORMAT,
                 "format_version": self.attrs.get("format_version"), "baked_by": self.BAKE,
                 "attrs": {k: plain(v) for k, v in sorted(self.attrs.items()) if k not in ("format", "format_version")},

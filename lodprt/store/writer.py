@@ -87,8 +87,9 @@ def check_destination(path: str | os.PathLike, *, overwrite: bool, format: str =
         raise StoreError(f"{path}: is a symbolic link (to {os.readlink(path)}); name the store's own folder, or "
                          "remove the link")
     if not path.exists():
-        if not path.parent.exists():
-            raise StoreError(f"{path}: the folder {path.parent} does not exist")
+        if not path.parent.is_dir():  # a parent that is a file raised NotADirectoryError making the partial folder
+            what = "is a file, not a folder" if path.parent.exists() else "does not exist"
+            raise StoreError(f"{path}: the folder {path.parent} {what}")
         return
     if not overwrite:
         raise StoreError(f"{path}: already exists; pass overwrite=True to replace it")
