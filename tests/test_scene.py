@@ -456,10 +456,11 @@ def test_obj_with_texture_coordinates_keeps_an_unreferenced_vertex(tmp_path):
 
 def test_obj_vertex_index_zero_is_refused_naming_the_line(tmp_path):
     """OBJ counts vertices from 1 (negative: back from the last), so an index 0 names no vertex: trimesh took
-    another vertex for it. A 0 elsewhere (a texture index, a coordinate, 10) is no vertex index 0."""
+    another vertex for it (-0 too: it was read as vertex 0). A 0 elsewhere (a texture index, a coordinate, 10) is no
+    vertex index 0."""
     text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1/0 2/1 3\nf -1 -2 -3\n"
     load_mesh(write(tmp_path, "ok.obj", text))
-    for bad, line in (("f 0 2 3\n", 7), ("f 2 4 3 0\n", 7), ("f  2/1 00/1 3\n", 7)):
+    for bad, line in (("f 0 2 3\n", 7), ("f 2 4 3 0\n", 7), ("f  2/1 00/1 3\n", 7), ("f 2 -0 3\n", 7)):
         with pytest.raises(SceneError, match=rf"bad\.obj: field 'faces': line {line} uses vertex index 0"):
             load_mesh(write(tmp_path, "bad.obj", text + bad))
 

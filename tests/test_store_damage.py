@@ -119,14 +119,21 @@ def test_damaged_chunk_is_one_line_naming_store_array_and_info(tmp_path, spot_sc
     assert open_store(out).sample(0)[0].size > 0  # the other samples still read
 
 
+def edit_json(path, **changes):
+    doc = json.loads(path.read_text())
+    doc.update(changes)
+    path.write_text(json.dumps(doc))
+
+
 @pytest.mark.parametrize("damage", ["garbled metadata", "lost metadata", "lost sample metadata", "lost array",
-                                    "lost hierarchy"])
+                                    "lost hierarchy", "garbled hierarchy", "unknown node type", "unknown data type"])
 def test_info_names_a_store_part_whose_metadata_or_folder_is_gone(tmp_path, spot_scene, capsys, damage):
     """An array's zarr.json garbled or gone (zarr cannot open the array, or no longer sees it), a required array
-    gone whole, or the hierarchy/ group of a store baked with one: info names the part in one line and exits 1,
-    --verify too, and a run that needs the part says the store is damaged. (They raised JSONDecodeError or KeyError
-    with a traceback; a lost sample array's metadata and a lost hierarchy were called undamaged, exit 0, and the
-    store without its hierarchy was said to be baked with --no-hierarchy.)"""
+    gone whole, the hierarchy/ group of a store baked with one gone or garbled, a zarr.json of no known node type
+    or data type: info names the part in one line and exits 1, --verify too, and a run that needs the part says
+    the store is damaged. (They raised JSONDecodeError or KeyError with a traceback; a lost sample array's
+    metadata, a lost hierarchy and an unknown node type were called undamaged, exit 0, and the store without its
+    hierarchy was said to be baked with --no-hierarchy.)"""
     out = tmp_path / "out.zarr"
     assert main(["bake", str(spot_scene), "-o", str(out), "--device", "cpu", "--sh-order", "2"]) == 0
     part, named = {"garbled metadata": ("samples/00001/coefficients", "'samples/00001/coefficients/zarr.json' "
@@ -135,11 +142,21 @@ def test_info_names_a_store_part_whose_metadata_or_folder_is_gone(tmp_path, spot
                    "lost sample metadata": ("samples/00001/vertex_ids", "'samples/00001/vertex_ids': its zarr.json "
                                             "is missing"),
                    "lost array": ("scene/normals", "'scene/normals' is missing"),
-                   "lost hierarchy": ("hierarchy", "'hierarchy/parent' is missing")}[damage]
-    if damage == "garbled metadata":
-        (out / part / "zarr.json").write_text("{bad")
+                   "lost hierarchy": ("hierarchy", "'hierarchy/parent' is missing"),
+                   "garbled hierarchy": ("hierarchy", "'hierarchy/zarr.json' cannot be read"),
+                   "unknown node type": ("scene/positions", "'scene/positions/zarr.json' names no array or group "
+                                         "(node_type 'foo')"),
+                   "unknown data type": ("scene/positions", "array 'scene/positions': its metadata cannot be "
+                                         "read (")}[damage]
+    meta = out / part / "zarr.json"
+    if damage.startswith("garbled"):
+        meta.write_text("{bad")
     elif damage.startswith("lost") and "metadata" in damage:
-        (out / part / "zarr.json").unlink()
+        meta.unlink()
+    elif damage == "unknown node type":
+        edit_json(meta, node_type="foo")
+    elif damage == "unknown data type":
+        edit_json(meta, data_type="bogus")
     else:
         shutil.rmtree(out / part)
     for verify in ([], ["--verify"]):
@@ -147,8 +164,8 @@ def test_info_names_a_store_part_whose_metadata_or_folder_is_gone(tmp_path, spot
         assert main(["info", str(out), *verify]) == 1, verify
         err = capsys.readouterr().err
         assert "Traceback" not in err and f"{out}: damaged: {named}" in err and "bake it again" in err, err
-    if damage == "lost hierarchy":
-        with pytest.raises(StoreError, match=r"'hierarchy' is missing: the store is damaged"):
+    if damage in ("lost hierarchy", "garbled hierarchy"):
+        with pytest.raises(StoreError, match=r"'hierarchy' (is missing|cannot be read .*): the store is damaged"):
             open_store(out).hierarchy()
     capsys.readouterr()
     assert main(["info", str(out), "--json"]) == 1
@@ -262,3 +279,29 @@ def test_a_store_under_a_file_is_refused_in_one_line(tmp_path, spot_scene, capsy
         assert len([ln for ln in err.splitlines() if "error" in ln]) == 1, err
     assert afile.read_text() == "mine" and sorted(p.name for p in tmp_path.iterdir()) == ["afile", "s.zarr",
                                                                                          "spot.toml"]
+
+
+@pytest.mark.parametrize("root", ["null", '{"zarr_format": 3, "node_type": "group", "attributes": null}'])
+def test_a_root_zarr_json_of_no_group_is_not_a_store(tmp_path, spot_scene, capsys, root):
+    """A root zarr.json that is JSON but no group's (null, attributes null): one line, status 2, "not a lodprt
+    store" (it raised AttributeError with a traceback)."""
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    (out / "zarr.json").write_text(root)
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "not a lodprt store" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_info_of_a_store_without_its_mode_attribute(tmp_path, spot_scene, capsys):
+    """The root's mode attribute removed: info prints the summary with mode None (it raised TypeError adding
+    None to a string)."""
+    out = tmp_path / "out.zarr"
+    assert main(["bake", str(spot_scene), "-o", str(out), *FAST]) == 0
+    doc = json.loads((out / "zarr.json").read_text())
+    del doc["attributes"]["mode"]
+    (out / "zarr.json").write_text(json.dumps(doc))
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 0
+    assert "(None)" in capsys.readouterr().out

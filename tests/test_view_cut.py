@@ -214,3 +214,35 @@ def test_a_triangle_budget_under_a_flipping_cut_is_met(spot_store):
     stats = [rt.update().stats for _ in range(60)]
     assert stats[-1]["triangles"] <= 1200 and stats[-1]["refined"] == stats[-1]["coarsened"] == 0, \
         [(s["triangles"], s["error_bound"]) for s in stats[-5:]]
+
+
+def test_another_alpha_at_the_same_bound_lets_the_cut_coarsen(spot_store):
+    """M-7 forgets why nodes were split when the criterion changes, not only its bound: the viewer's alpha keys call
+    set_error_bound(same bound, alpha). With alpha 0 -> 1 at bound 0.03 the cut stayed at its 3,616 triangles
+    (every coarsen candidate under bound / hysteresis, none collapsed); it falls toward the fresh cut of alpha 1."""
+    from lodprt.runtime.session import Runtime
+
+    def still(rt, n):
+        return [rt.update().stats for _ in range(n)][-1]
+
+    rt = Runtime(spot_store, device="cpu", criterion="thesis", error_bound=0.03, alpha=0.0)
+    rt.set_camera(eye=(2.0, 2.0, 0.0), width=64, height=48)
+    before = still(rt, 20)["triangles"]
+    rt.set_error_bound(0.03, alpha=1.0)
+    after = still(rt, 20)["triangles"]
+    fresh = Runtime(spot_store, device="cpu", criterion="thesis", error_bound=0.03, alpha=1.0)
+    fresh.set_camera(eye=(2.0, 2.0, 0.0), width=64, height=48)
+    assert after < before / 2 and still(fresh, 20)["triangles"] < before / 2, (before, after)
+
+
+def test_a_far_plane_given_alone_keeps_the_scene_in_view(spot_store):
+    """camera_matrices chose near = max(nearest depth x 0.99, far / 1000): a far of 10,000 given alone put the
+    near plane past the model and culled every node (the base mesh, 128 triangles, against 1,273)."""
+    from lodprt.runtime.session import Runtime
+
+    counts = []
+    for far in (None, 100.0, 10_000.0):
+        rt = Runtime(spot_store, device="cpu", error_bound=8.0, target_psnr=None)
+        rt.set_camera(eye=(2.0, 2.0, 0.0), width=64, height=48, far=far)
+        counts.append([rt.update().stats for _ in range(6)][-1]["triangles"])
+    assert counts[0] == counts[1] == counts[2], counts

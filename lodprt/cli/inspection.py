@@ -65,7 +65,7 @@ def cmd_info(args) -> int:
     if args.json:
         print(json.dumps(info, indent=2))
         return report_damage(args.store, info["damage"])
-    mode = info["mode"] + (f", threshold {info['threshold_deg']} deg" if info.get("threshold_deg") is not None else "")
+    mode = str(info["mode"]) + (f", threshold {info['threshold_deg']} deg" if info.get("threshold_deg") is not None else "")
     print(f"{args.store}: lodprt store v{info['format_version']} ({mode}) from {info['source']}")
     print(f"  vertices {info['vertices']:,}, triangles {info['faces']:,}")
     print(

@@ -212,12 +212,12 @@ def obj_vertex_count(text: bytes) -> int:
 
 
 def refuse_obj_index_zero(path: Path, text: bytes) -> None:
-    """SceneError naming the line of the first ``f`` line with a vertex index 0 in ``text``, the bytes of the OBJ
+    """SceneError naming the line of the first ``f`` line with a vertex index 0 (or -0) in ``text``, the bytes of the OBJ
     file at ``path``: OBJ counts vertices from 1 (and from -1 backwards), so 0 names none, and the readers silently
     took another vertex for it."""
     import re
 
-    for found in re.finditer(rb"[ \t][+]?0+(?=[/ \t\r\n]|$)", text):  # a token 0: on an f line, an index
+    for found in re.finditer(rb"[ \t][+-]?0+(?=[/ \t\r\n]|$)", text):  # a token 0 (or -0): on an f line, an index
         start = text.rfind(b"\n", 0, found.start()) + 1
         if text[start:found.start() + 1].lstrip(b" \t")[:2] not in (b"f ", b"f\t"):
             continue

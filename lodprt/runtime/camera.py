@@ -204,8 +204,10 @@ def camera_matrices(camera, points=None) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = pts.min(0), pts.max(0)
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         depth = -(corners @ view[:3, :3].T + view[:3, 3])[:, 2]
-        f = max(float(depth.max()) * 1.01, 1e-6) if far is None else far
-        near = max(float(depth.min()) * 0.99, f * 1e-3) if near is None else near
+        scene_far = max(float(depth.max()) * 1.01, 1e-6)
+        f = scene_far if far is None else far
+        # the precision floor reads the scene's depth, not a far given alone: a far of 10,000 put near past the scene
+        near = max(float(depth.min()) * 0.99, scene_far * 1e-3) if near is None else near
         far = max(f, near * 1.0001)
     return view, perspective(camera.fov, camera.width / camera.height, near, far)
 

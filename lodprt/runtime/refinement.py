@@ -94,8 +94,8 @@ class CutRefinement:
         self.pin(None)
 
     def forget_splits(self) -> None:
-        """M-7: the camera, the lights or the bound moved (or E-5 starts again): the errors the nodes were split
-        for no longer hold."""
+        """M-7: the camera, the lights or the criterion (its bound, alpha) moved, or E-5 starts again: the errors
+        the nodes were split for no longer hold."""
         if self.split_nodes:
             self.split_for[np.concatenate(self.split_nodes)] = 0.0
             self.split_nodes = []

@@ -294,6 +294,7 @@ class Runtime:
         new = self.criterion.with_bound(self.budgets.limit(check_bound(error_bound)))  # B-2: never under the floor
         self.criterion = new if alpha is None else new.with_alpha(alpha)
         self.refinement.dirty = self.errors.refresh_all = True
+        self.refinement.forget_splits()  # M-7: another alpha at the same bound is another criterion too
 
     def set_lod(self, enabled: bool) -> None:
         """LOD off shows the full mesh (every leaf active); on starts again from the base mesh (no pins)."""

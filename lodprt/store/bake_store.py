@@ -264,7 +264,9 @@ class Store:
     def has_hierarchy(self) -> bool:
         """The bake built a vertex hierarchy (root attribute ``with_hierarchy``; older stores: a hierarchy/ group).
         A store that says so and lost the group is damaged (``hierarchy`` raises), not a store without one."""
-        return bool(self.attrs.get("with_hierarchy", "hierarchy" in self.root))
+        if "with_hierarchy" in self.attrs:  # read first: a garbled hierarchy/zarr.json is damage, named on reading
+            return bool(self.attrs["with_hierarchy"])
+        return "hierarchy" in self.root
 
     def hierarchy(self):
         """The stored vertex hierarchy (``lodprt.model.hierarchy.Hierarchy``); StoreError when the bake made none."""

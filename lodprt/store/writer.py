@@ -76,7 +76,8 @@ def store_format(path: str | os.PathLike) -> str | None:
         doc = json.loads((Path(path) / "zarr.json").read_text())
     except (OSError, ValueError):
         return None
-    return doc.get("attributes", {}).get("format")
+    attrs = doc.get("attributes") if isinstance(doc, dict) else None  # JSON, but not a group's (null, a list)
+    return attrs.get("format") if isinstance(attrs, dict) else None
 
 
 def check_destination(path: str | os.PathLike, *, overwrite: bool, format: str = FORMAT_NAME,
