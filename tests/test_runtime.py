@@ -473,12 +473,14 @@ def test_bad_camera_planes_and_fov_are_refused(rt, field, bad):
 
 
 def test_good_camera_planes_give_a_finite_frustum(rt):
-    """A lone near or far, and numpy numbers for the fov, give finite clip planes (the frustum the cut culls with)."""
+    """A lone near or far, and numpy numbers for the fov, near and far (0-d arrays too, which the first check of
+    a number refused), give finite clip planes (the frustum the cut culls with), kept as floats."""
     for kw in (dict(near=1e-3), dict(far=50.0), dict(near=0.01, far=2.0), dict(fov=np.float32(45.0)),
-               dict(fov=np.int64(60))):
+               dict(fov=np.int64(60)), dict(fov=np.array(45.0), near=np.array(0.01), far=np.float32(2.0))):
         cam = Camera(eye=(0, 0.3, 0.6), target=(0, 0.1, 0), **kw)
         vp = view_projection(cam, rt.bounds)
         assert np.isfinite(vp).all() and np.isfinite(clip_planes(vp)).all(), kw
+        assert all(type(v) is float for v in (cam.fov, cam.near, cam.far) if v is not None), kw
 
 
 @pytest.mark.parametrize("bad", [0, -3, 1.9, float("nan"), "2", True])

@@ -47,6 +47,7 @@ class Camera:
             raise LodprtError(f"camera up: {list(self.up)} has no direction; give a non-zero vector (default 0 1 0)")
         if not (is_number(self.fov) and 0.0 < float(self.fov) < 180.0):  # "45" or True is no angle
             raise LodprtError(f"camera fov: {self.fov!r} degrees; must be a number strictly between 0 and 180")
+        object.__setattr__(self, "fov", float(self.fov))
         size = []
         for name in ("width", "height"):  # whole pixels: 320.0 is 320, 320.5 or "320" is refused
             v = getattr(self, name)
@@ -60,12 +61,16 @@ class Camera:
             v = getattr(self, name)
             if v is not None and not (is_number(v) and math.isfinite(v) and v > 0):
                 raise LodprtError(f"camera {name}: {v!r}; must be a finite number > 0 (None: from the scene's bounds)")
+            if v is not None:
+                object.__setattr__(self, name, float(v))
         if self.near is not None and self.far is not None and not self.near < self.far:
             raise LodprtError(f"camera near/far: {self.near}, {self.far}; need 0 < near < far")
 
 
 def is_number(value) -> bool:
-    """A real number (numpy's included), not a bool or a string."""
+    """A real number (numpy's included, and a 0-d numpy array of one), not a bool or a string."""
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf":
+        return True
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
