@@ -451,6 +451,9 @@ def test_bad_settings_are_refused(store, rt):
         Camera(eye=(0, 0, 1), target=(0, 0, 0), fov=180)
     with pytest.raises(LodprtError, match="eye"):
         Camera(eye=(0, np.nan, 1), target=(0, 0, 0))
+    for eye in ("abc", (0, "1", 2), [[0, 0], [1]], (0, True, 1)):  # "abc" raised a bare ValueError
+        with pytest.raises(LodprtError, match=r"^camera eye: expected 3 finite numbers"):
+            Camera(eye=eye, target=(0, 0, 0))
     with pytest.raises(LodprtError, match="lights"):
         rt.set_lights(np.zeros((2, 2)))
     with pytest.raises(LodprtError, match="colors"):
@@ -476,10 +479,14 @@ def test_good_camera_planes_give_a_finite_frustum(rt):
     """A lone near or far, and numpy numbers for the fov, near and far (0-d arrays too, which the first check of
     a number refused), give finite clip planes (the frustum the cut culls with), kept as floats."""
     for kw in (dict(near=1e-3), dict(far=50.0), dict(near=0.01, far=2.0), dict(fov=np.float32(45.0)),
-               dict(fov=np.int64(60)), dict(fov=np.array(45.0), near=np.array(0.01), far=np.float32(2.0))):
+               dict(fov=np.int64(60)), dict(fov=np.array(45.0), near=np.array(0.01), far=np.float32(2.0)),
+               dict(far=1e160), dict(near=1e-6, far=1e20)):  # the last two: a far plane at infinity (NaN before)
         cam = Camera(eye=(0, 0.3, 0.6), target=(0, 0.1, 0), **kw)
         vp = view_projection(cam, rt.bounds)
-        assert np.isfinite(vp).all() and np.isfinite(clip_planes(vp)).all(), kw
+        planes = clip_planes(vp)
+        assert np.isfinite(vp).all() and np.isfinite(planes).all(), kw
+        ahead = np.array([0.0, 0.1, 0.0, 1.0])  # the target: inside every plane
+        assert (planes @ ahead >= 0).all(), kw
         assert all(type(v) is float for v in (cam.fov, cam.near, cam.far) if v is not None), kw
 
 

@@ -241,7 +241,7 @@ def test_a_far_plane_given_alone_keeps_the_scene_in_view(spot_store):
     from lodprt.runtime.session import Runtime
 
     counts = []
-    for far in (None, 100.0, 10_000.0):
+    for far in (None, 100.0, 10_000.0, 1e160):  # 1e160: a far plane at infinity in float64 (NaN planes before)
         rt = Runtime(spot_store, device="cpu", error_bound=8.0, target_psnr=None)
         rt.set_camera(eye=(2.0, 2.0, 0.0), width=64, height=48, far=far)
         counts.append([rt.update().stats for _ in range(6)][-1]["triangles"])

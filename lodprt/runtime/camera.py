@@ -11,7 +11,7 @@ import numbers
 
 import numpy as np
 
-from lodprt.errors import LodprtError, is_whole
+from lodprt.errors import LodprtError, is_number, is_whole, shown
 from lodprt.model.scene import referenced_bounds
 
 log = logging.getLogger(__name__)
@@ -39,20 +39,25 @@ class Camera:
 
     def __post_init__(self):
         for name in ("eye", "target", "up"):
-            v = np.asarray(getattr(self, name), np.float64)
-            if v.shape != (3,) or not np.isfinite(v).all():
-                raise LodprtError(f"camera {name}: expected 3 finite numbers, got {getattr(self, name)!r}")
+            given = getattr(self, name)
+            try:
+                v = np.asarray(given, object)
+            except ValueError:  # ragged
+                v = np.empty(0, object)
+            if v.shape != (3,) or not all(is_number(x) and math.isfinite(x) for x in v):
+                raise LodprtError(f"camera {name}: expected 3 finite numbers, got {shown(given)}")
+            v = v.astype(np.float64)
             object.__setattr__(self, name, tuple(float(x) for x in v))
         if not np.linalg.norm(self.up) > 0:  # no direction: refused, not replaced as a parallel one is (view_up)
             raise LodprtError(f"camera up: {list(self.up)} has no direction; give a non-zero vector (default 0 1 0)")
         if not (is_number(self.fov) and 0.0 < float(self.fov) < 180.0):  # "45" or True is no angle
-            raise LodprtError(f"camera fov: {self.fov!r} degrees; must be a number strictly between 0 and 180")
+            raise LodprtError(f"camera fov: {shown(self.fov)} degrees; must be a number strictly between 0 and 180")
         object.__setattr__(self, "fov", float(self.fov))
         size = []
         for name in ("width", "height"):  # whole pixels: 320.0 is 320, 320.5 or "320" is refused
             v = getattr(self, name)
             if not is_whole(v, 1):
-                raise LodprtError(f"camera size: {self.width!r} x {self.height!r}; width and height must be whole "
+                raise LodprtError(f"camera size: {shown(self.width)} x {shown(self.height)}; width and height must be whole "
                                   "numbers >= 1")
             size.append(int(v))
         object.__setattr__(self, "width", size[0])
@@ -60,18 +65,11 @@ class Camera:
         for name in ("near", "far"):  # each alone too: a near of 0 or a NaN far leaves no finite projection
             v = getattr(self, name)
             if v is not None and not (is_number(v) and math.isfinite(v) and v > 0):
-                raise LodprtError(f"camera {name}: {v!r}; must be a finite number > 0 (None: from the scene's bounds)")
+                raise LodprtError(f"camera {name}: {shown(v)}; must be a finite number > 0 (None: from the scene's bounds)")
             if v is not None:
                 object.__setattr__(self, name, float(v))
         if self.near is not None and self.far is not None and not self.near < self.far:
             raise LodprtError(f"camera near/far: {self.near}, {self.far}; need 0 < near < far")
-
-
-def is_number(value) -> bool:
-    """A real number (numpy's included, and a 0-d numpy array of one), not a bool or a string."""
-    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf":
-        return True
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def clip_planes(view_proj: np.ndarray) -> np.ndarray:
@@ -79,7 +77,9 @@ def clip_planes(view_proj: np.ndarray) -> np.ndarray:
     (Gribb-Hartmann): a point x is inside when ``a x + b y + c z + d >= 0`` for all six."""
     m = np.asarray(view_proj, np.float64)
     planes = np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2], m[3] - m[2]])
-    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+    n = np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+    # a far plane at infinity in float64 (far / near past ~1e16: m[2][2] is -1 exactly) has no normal: it culls nothing
+    return np.where(n > 0, planes / np.where(n > 0, n, 1.0), np.array([0.0, 0.0, 0.0, 1.0]))
 
 
 def as_camera(camera=None, **kw) -> Camera:

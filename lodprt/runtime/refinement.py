@@ -79,10 +79,10 @@ class CutRefinement:
         self.extra_nodes: np.ndarray | None = None  # where ``set_extra`` last wrote it
         #: (N,) nodes kept split whatever their error (E-5: where a still frame's measured error is), and how many
         self.pinned, self.pins = np.zeros(h.num_nodes, bool), 0
-        #: (N,) M-7: the error each node was split for at this view, these lights and this bound (0: none); the
+        #: (N,) M-7: the error each node was split for at this view, these lights and this criterion (0: none); the
         #: coarsen test reads at least it. ``split_nodes``: where it is set (cleared there only: a moving camera
         #: forgets every frame, and a memset of every node would cost a big scene's frame)
-        self.split_for, self.split_nodes, self.split_bound = np.zeros(h.num_nodes, np.float32), [], None
+        self.split_for, self.split_nodes = np.zeros(h.num_nodes, np.float32), []
 
     def reset(self, cut) -> None:
         """Start again from ``cut`` (LOD switched): the first frame converges in full."""
@@ -138,9 +138,6 @@ class CutRefinement:
         culled, err = errors.lookup(nodes, bound, evaluate, self.converged_once)
         if self.extra is not None:  # M-6: a node at the actual light's shadow edge refines, its parent stays split
             err = np.maximum(err, self.extra[nodes])
-        if bound != self.split_bound:  # M-7: another bound (B-1, B-2, E-4, E-5), other decisions
-            self.forget_splits()
-            self.split_bound = bound
         k, frame = len(rc), errors.frame
         own = err[:k]  # the refine candidates' own errors (pins aside): what a split is made for (M-7)
         err = np.concatenate([own, np.maximum(err[k:], self.split_for[cc])])  # M-7: at least what it was split for

@@ -90,11 +90,10 @@ class Runtime:
                  interpolation: str = DEFAULT_INTERPOLATION, target_psnr: float | str | None = None):
         from lodprt.devices import resolve_device
 
-        #: the view cut's criterion, with its settings (the steering replaces it with one of another bound)
         if triangle_budget is not None and target_psnr is None and criterion == "screen":
             target_psnr = "off"  # the budget steers the bound instead of the default target
-        self.criterion = resolve_criterion(criterion, error_bound=error_bound, alpha=alpha,
-                                           pixel_tolerance=pixel_tolerance, target_psnr=target_psnr)
+        self._criterion = resolve_criterion(criterion, error_bound=error_bound, alpha=alpha,
+                                            pixel_tolerance=pixel_tolerance, target_psnr=target_psnr)
         if self.criterion.steered() and triangle_budget is not None:
             raise LodprtError("target_psnr steers the screen criterion's bound: not with a triangle_budget")
         self.estimated_psnr = None  # E-3 of the last estimate (target_psnr set)
@@ -265,6 +264,17 @@ class Runtime:
                 host_array(weights, np.float32, wp.float32, self.device))
 
     @property
+    def criterion(self) -> Criterion:
+        """The view cut's criterion, with its settings (the steering replaces it with one of another bound)."""
+        return self._criterion
+
+    @criterion.setter
+    def criterion(self, new: Criterion) -> None:
+        if new != self._criterion:  # M-7: another bound (B-1, B-2, E-4, E-5) or alpha: other decisions
+            self.refinement.forget_splits()
+        self._criterion = new
+
+    @property
     def error_bound(self) -> float:
         """The criterion's error bound (steered by a target_psnr or a triangle_budget)."""
         return self.criterion.error_bound
@@ -294,7 +304,6 @@ class Runtime:
         new = self.criterion.with_bound(self.budgets.limit(check_bound(error_bound)))  # B-2: never under the floor
         self.criterion = new if alpha is None else new.with_alpha(alpha)
         self.refinement.dirty = self.errors.refresh_all = True
-        self.refinement.forget_splits()  # M-7: another alpha at the same bound is another criterion too
 
     def set_lod(self, enabled: bool) -> None:
         """LOD off shows the full mesh (every leaf active); on starts again from the base mesh (no pins)."""

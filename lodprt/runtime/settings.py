@@ -14,19 +14,16 @@ from __future__ import annotations
 
 import math
 
-from lodprt.errors import LodprtError, is_whole
+from lodprt.errors import LodprtError, is_number, is_whole, shown
 
 
 def checked_number(value, field: str, must: str, *, low: float, high: float = math.inf,
                    low_open: bool = False) -> float:
     """``value`` as a finite float in [low, high] ((low, high] with ``low_open``); otherwise LodprtError
-    "``field`` ``value``: must ``must``"."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        x = math.nan
+    "``field`` ``value``: must ``must``" (a string or a bool is no number here, as for every setting: ``is_number``)."""
+    x = float(value) if is_number(value) else math.nan
     if not (math.isfinite(x) and (low < x if low_open else low <= x) and x <= high):
-        raise LodprtError(f"{field} {value}: must {must}")
+        raise LodprtError(f"{field} {shown(value)}: must {must}")
     return x
 
 
@@ -63,12 +60,12 @@ def check_triangle_budget(value) -> int | None:
     must = "be a whole number of triangles >= 1"
     n = checked_number(value, "triangle_budget", must, low=1.0)
     if n != math.floor(n):
-        raise LodprtError(f"triangle_budget {value}: must {must}")
+        raise LodprtError(f"triangle_budget {shown(value)}: must {must}")
     return int(n)
 
 
 def check_max_passes(value) -> int:
     """``max_passes`` as an int >= 1 (a whole number: 1.9 passes is refused, not truncated; NaN or "2" too)."""
     if not is_whole(value, 1):
-        raise LodprtError(f"max_passes {value!r}: must be a whole number of passes >= 1")
+        raise LodprtError(f"max_passes {shown(value)}: must be a whole number of passes >= 1")
     return int(value)
