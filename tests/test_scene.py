@@ -546,3 +546,79 @@ def test_an_unknown_file_type_is_named(tmp_path):
         with pytest.raises(SceneError, match=rf"{name}: not a file type lodprt reads \(\.{name[2:]}\): a scene file "
                                              r"ends in \.toml; a mesh in \.obj"):
             load_scene(write(tmp_path, name, "v 0 0 0\n"))
+
+
+#: Four vertices and two faces, the content every OBJ layout below writes (an independent oracle for the reader).
+TETRA_V = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+TETRA_F = [[0, 1, 2], [0, 2, 3]]
+
+
+def read_obj_bytes(tmp_path, data: bytes, name="m.obj"):
+    path = tmp_path / name
+    path.write_bytes(data)
+    return load_mesh(path)
+
+
+@pytest.mark.parametrize("text", [
+    "  v 0 0 0\n  v 1 0 0\n\tv 0 1 0\n v 0 0 1\nf 1 2 3\n  f 1 3 4\n",  # trimesh raised IndexError
+    "v 0 0 0\n   v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n",  # one indented line
+    "v\t0\t0\t0\nv\t1\t0\t0\nv 0 1\t0\nv 0 0 1\nf\t1\t2\t3\nf 1 3\t4\n",  # tabs
+    "\ufeffv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n",  # a UTF-8 byte order mark
+    "v 0 0 \\\n   0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n",  # a continued line keeps its blanks
+], ids=["indented", "one-indented", "tabs", "bom", "continued-line"])
+def test_obj_indented_and_tab_separated_lines_read_as_written(tmp_path, text):
+    """Leading blanks and tabs separate nothing in OBJ; trimesh dropped indented 'v' lines (a raw IndexError, or
+    another vertex in their place)."""
+    pos, faces = read_obj_bytes(tmp_path, text.encode())
+    np.testing.assert_array_equal(pos, TETRA_V)
+    np.testing.assert_array_equal(faces, TETRA_F)
+
+
+def test_obj_trailing_comments_are_dropped(tmp_path):
+    """'#' starts a comment to the line's end: 'f 1 2 3 # 0' is face 1 2 3 (trimesh raised ValueError; the 0 is no
+    vertex index 0), and a '#' in a material name is kept."""
+    text = ("# tetra\nmtllib m.mtl\nv 0 0 0 # origin\nv 1 0 0#x\nv 0 1 0\nv 0 0 1\nusemtl red#1\n"
+            "f 1 2 3 # 0\nf 1/1 3/1 4/1 # 7\nvt 0 0 # uv\n")
+    pos, faces = read_obj_bytes(tmp_path, text.encode())
+    np.testing.assert_array_equal(pos, TETRA_V)
+    np.testing.assert_array_equal(faces, TETRA_F)
+    from lodprt.model.meshio import normalised_obj
+    assert b"usemtl red#1\n" in normalised_obj(text.encode())
+
+
+def test_obj_cr_only_line_ends(tmp_path):
+    """Old Mac files end lines with CR alone: trimesh read them as one line (ValueError, or no vertex at all when the
+    first line was a comment). Lines are counted as the file shows them in error messages."""
+    body = "# old mac\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n"
+    for text in (body.replace("\n", "\r"), body.replace("\n", "\r").rstrip("\r"), body.replace("\n", "\r\n")):
+        pos, faces = read_obj_bytes(tmp_path, text.encode())
+        np.testing.assert_array_equal(pos, TETRA_V)
+        np.testing.assert_array_equal(faces, TETRA_F)
+    with pytest.raises(SceneError, match=r"bad\.obj: field 'faces': line 8 uses vertex index 0"):
+        read_obj_bytes(tmp_path, (body + "f 1 0 2\n").replace("\n", "\r").encode(), "bad.obj")
+
+
+@pytest.mark.parametrize("face, message", [
+    ("f 1 3 9", "line 6: face 2 refers to vertex 9, but the file has only 4 vertices$"),
+    ("f 1/1 3/1 5/1", "line 6: face 2 refers to vertex 5, but the file has only 4 vertices$"),
+    ("f 1 2 3 5", "line 6: face 2 refers to vertex 5, but the file has only 4 vertices$"),
+    ("f -1 -2 -5", "line 6: face 2 refers to vertex -5, but the file has only 4 vertices before that line$"),
+], ids=["past-end", "with-vt", "quad", "negative"])
+def test_obj_face_index_past_the_last_vertex_names_the_line(tmp_path, face, message):
+    """trimesh raised a bare 'IndexError: index 8 is out of bounds for axis 0 with size 4'."""
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n" + face + "\nvt 0 0\n"
+    with pytest.raises(SceneError, match=r"bad\.obj: field 'faces': " + message) as err:
+        read_obj_bytes(tmp_path, text.encode(), "bad.obj")
+    assert "\n" not in str(err.value)
+
+
+def test_obj_negative_indices_count_back_from_their_own_line(tmp_path):
+    """OBJ's negative indices are relative to the vertices read so far: with a second object's 'v' lines after the
+    first's faces, trimesh counted back from the file's end and gave both faces the second triangle, silently."""
+    tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n"
+    text = tri + tri.replace("v 0", "v 5").replace("v 1", "v 6")
+    pos, faces = read_obj_bytes(tmp_path, text.encode())
+    np.testing.assert_array_equal(pos, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 0, 0], [6, 0, 0], [5, 1, 0]])
+    np.testing.assert_array_equal(faces, [[0, 1, 2], [3, 4, 5]])
+    with pytest.raises(SceneError, match=r"line 4: face 1 refers to vertex -4, but the file has only 3 vertices "):
+        read_obj_bytes(tmp_path, text.replace("f -3 -2 -1", "f -4 -2 -1", 1).encode(), "bad.obj")

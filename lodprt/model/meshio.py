@@ -9,6 +9,12 @@ pymeshlab's readers are C++ and crash the process on some malformed files (a PLY
 is a segmentation fault, an OFF face index out of range an abort), so it runs in a child process with a time
 limit: a bad file becomes a SceneError, never a crashed or hung bake.
 
+OBJ text is made plain before either reader sees it (``normalised_obj``), each line kept at its number and every
+``v`` line in its place: trimesh misread indented or tab-separated lines, trailing ``#`` comments and CR-only line
+ends. Negative (relative) face indices are made absolute where ``v`` lines follow faces (``resolve_obj_indices``):
+trimesh counted them back from the file's last vertex, not the face's. A face index past the vertices is a
+SceneError naming the line (``refuse_obj_index_past_end``), where trimesh raised a bare IndexError.
+
 Compressed files: a name ending in ``.gz``, ``.xz`` or ``.bz2`` (``bunny.obj.xz``) is decompressed in memory and
 read as the format its inner suffix names; the test meshes ship this way (``tests/data``).
 
@@ -25,6 +31,7 @@ import io
 import logging
 import lzma
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -93,17 +100,29 @@ def load_mesh(
     require_file(path, "mesh")
     data = decompressed(path)
     obj = suffix_of(path) == ".obj"
-    text = path.read_bytes() if obj and data is None else data  # an OBJ read once: trimesh and the two scans
-    verts, faces, points = _read_trimesh(path, text)
+    text = path.read_bytes() if obj and data is None else data  # an OBJ read once: the checks and trimesh
+    if obj:
+        raw, text = text, normalised_obj(text)
+        refuse_obj_index_zero(path, text)
+        text = resolve_obj_indices(path, text)
+        if text != raw:  # pymeshlab reads the text trimesh reads
+            data = text
+    n = obj_vertex_count(text) if obj else 0
+    try:
+        verts, faces, points = _read_trimesh(path, text)
+    except SceneError:
+        if obj:  # the reason in the file's terms, where it is a face index
+            refuse_obj_index_past_end(path, text)
+        raise
     reader = "trimesh"
+    if obj and len(faces) == 0:
+        refuse_obj_index_past_end(path, text)  # pymeshlab would crash on one (trimesh's faces were in range)
     if len(faces) == 0:
         verts, faces = _fallback(path, verts, points, data)
         reader = "pymeshlab (trimesh found no faces)"
-    elif obj and (made := len(verts)) != (n := obj_vertex_count(text)):
+    elif obj and (made := len(verts)) != n:
         verts, faces = _obj_by_pymeshlab(path, data, made, n)
         reader = f"pymeshlab (trimesh made {made} vertices of the file's {n})"
-    if obj:
-        refuse_obj_index_zero(path, text)
     log.info("%s: read with %s: %d vertices, %d triangles", path, reader, len(verts), len(faces))
     _check_coordinates(path, verts, np.inf, "in the file")
     if faces.min() < 0 or faces.max() >= len(verts):
@@ -206,8 +225,6 @@ def suffix_of(path: Path) -> str:
 
 def obj_vertex_count(text: bytes) -> int:
     """How many ``v`` lines (vertex positions) the OBJ file's bytes ``text`` have."""
-    import re
-
     return len(re.findall(rb"(?m)^[ \t]*v[ \t]", text))
 
 
@@ -215,8 +232,6 @@ def refuse_obj_index_zero(path: Path, text: bytes) -> None:
     """SceneError naming the line of the first ``f`` line with a vertex index 0 (or -0) in ``text``, the bytes of the OBJ
     file at ``path``: OBJ counts vertices from 1 (and from -1 backwards), so 0 names none, and the readers silently
     took another vertex for it."""
-    import re
-
     for found in re.finditer(rb"[ \t][+-]?0+(?=[/ \t\r\n]|$)", text):  # a token 0 (or -0): on an f line, an index
         start = text.rfind(b"\n", 0, found.start()) + 1
         if text[start:found.start() + 1].lstrip(b" \t")[:2] not in (b"f ", b"f\t"):
@@ -224,6 +239,68 @@ def refuse_obj_index_zero(path: Path, text: bytes) -> None:
         line = text.count(b"\n", 0, start) + 1
         raise SceneError(f"{path}: field 'faces': line {line} uses vertex index 0; OBJ vertex indices start at 1 "
                          "(negative ones count back from the last vertex)")
+
+
+def normalised_obj(text: bytes) -> bytes:
+    """The OBJ bytes ``text`` as trimesh reads them right, each line at its number and in its order: a UTF-8 BOM
+    dropped, CR-only line ends made LF, tabs spaces, leading blanks dropped (not on a line continued by a trailing
+    backslash, where they separate values) and ``#`` comments dropped (not on ``mtllib``/``usemtl``/``o``/``g``
+    lines, whose names may hold a ``#``)."""
+    out = text.removeprefix(b"\xef\xbb\xbf").replace(b"\r\n", b"\n").replace(b"\r", b"\n").replace(b"\t", b" ")
+    out = re.sub(rb"(?<!\\)\n +", b"\n", out.lstrip(b" "))
+    return re.sub(rb"#[^\n]*", _uncommented, out) if b"#" in out else out
+
+
+def _uncommented(found: re.Match) -> bytes:
+    """``found``, a ``#`` and the rest of its line, dropped unless the line names something (``normalised_obj``)."""
+    text = found.string
+    start = text.rfind(b"\n", 0, found.start()) + 1
+    return found.group(0) if re.match(rb"(?:mtllib|usemtl|o|g) ", text[start:start + 7]) else b""
+
+
+#: A vertex index on an ``f`` line's text after the ``f``: the first number of each ``v/vt/vn`` group.
+_INDEX = re.compile(rb"(?m)(?:^| )([+-]?\d+)(?=[/ ]|$)")
+
+
+def resolve_obj_indices(path: Path, text: bytes) -> bytes:
+    """``text``, the normalised bytes of the OBJ file at ``path``, with negative (relative) vertex indices made absolute
+    where ``v`` lines follow a face: they count back from the face's line, trimesh counted from the file's end."""
+    first = re.search(rb"(?m)^f ", text)
+    if first is None or text.rfind(b"\nv ") < first.start():
+        return text
+    if not re.search(rb"\nf [^\n-]*-", b"\n" + text):
+        return text  # no face line has a "-"
+    return _obj_face_lines(path, text)
+
+
+def refuse_obj_index_past_end(path: Path, text: bytes) -> None:
+    """SceneError naming the line of the first vertex index in ``text`` (normalised OBJ bytes) past the file's
+    vertices (a negative one: past those before its line). Line by line, so run only where trimesh failed or found no
+    faces: trimesh raised a bare IndexError for one, pymeshlab crashes."""
+    _obj_face_lines(path, text)
+
+
+def _obj_face_lines(path: Path, text: bytes) -> bytes:
+    """``text`` with each face line's negative vertex indices made absolute; SceneError for the first past the file's
+    vertices."""
+    n, out, seen, face = obj_vertex_count(text), [], 0, 0
+    for number, line in enumerate(text.split(b"\n"), 1):
+        seen += line.startswith(b"v ")
+        if line.startswith(b"f "):
+            face += 1
+            line = b"f " + _INDEX.sub(lambda found: _absolute(path, number, face, found, n, seen), line[2:])
+        out.append(line)
+    return b"\n".join(out)
+
+
+def _absolute(path: Path, line: int, face: int, found: re.Match, n: int, seen: int) -> bytes:
+    """The ``_INDEX`` match ``found`` on face ``face`` (line ``line``) with a negative index made absolute, ``seen``
+    vertices before it of the file's ``n``; SceneError for an index past them."""
+    k = int(found.group(1))
+    if k > n or -k > seen:
+        raise SceneError(f"{path}: field 'faces': line {line}: face {face} refers to vertex {k}, but the file has "
+                         f"only {n if k > 0 else seen} vertices" + ("" if k > 0 else " before that line"))
+    return found.group(0) if k >= 0 else found.group(0).replace(found.group(1), b"%d" % (seen + k + 1))
 
 
 def _obj_by_pymeshlab(path: Path, data: bytes | None, made: int, n: int) -> tuple[np.ndarray, np.ndarray]:
