@@ -224,7 +224,7 @@ def test_a_hierarchy_with_a_broken_link_is_refused_naming_store_and_node(tmp_pat
 
 def test_a_lost_sample_group_or_attribute_is_named(spot_scene, tmp_path, capsys):
     """A sample group deleted, a sample's statistics or the lights' intensity attribute removed: info (damage,
-    status 1), compress, radiance and export say which group or attribute is gone (they raised KeyError), and bake
+    status 1, the attribute too), compress, radiance and export say which group or attribute is gone (they raised KeyError), and bake
     --resume or
     --add-samples call the store damaged, leaving no partial folder behind (one blocked the next bake)."""
     store = tmp_path / "s.zarr"
@@ -257,8 +257,9 @@ def test_a_lost_sample_group_or_attribute_is_named(spot_scene, tmp_path, capsys)
         meta.write_text(json.dumps(doc))
         argv = ["info", str(store)] if key == "vertices_kept" else \
             ["radiance", str(store), "--sample", "0", "--eye", "0", "1", "3", "-o", str(tmp_path / "q.npy")]
-        assert main(argv) == 2
-        want = "attribute(s) vertices_kept missing" if key == "vertices_kept" else "lights: attribute(s) intensity missing"
+        assert main(argv) == (1 if key == "vertices_kept" else 2)  # info: damage, as for a missing array
+        want = f"{store}: damaged: samples/00000: attribute(s) vertices_kept missing" if key == "vertices_kept" \
+            else "lights: attribute(s) intensity missing"
         assert want in capsys.readouterr().err
 
 
@@ -305,3 +306,144 @@ def test_info_of_a_store_without_its_mode_attribute(tmp_path, spot_scene, capsys
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     assert "(None)" in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def pristine(tmp_path_factory):
+    """Intact stores of each kind the tests below damage, baked once (they damage copies, ``copy_of``): a full and
+    a light-cut point-light store, f16, q8 and cpca re-encodings of the full one, q8 of the cut one, a transfer
+    store, a LOD transfer store and a volume store with a stored lighting."""
+    d = tmp_path_factory.mktemp("pristine")
+    scene = d / "spot.toml"
+    scene.write_text(f'[[object]]\nmesh = "{SPOT.as_posix()}"\n[floor]\nresolution = 12\n[lights]\ngrid = [2, 1, 1]\n')
+    assert main(["bake", str(scene), "-o", str(d / "full.zarr"), *FAST]) == 0
+    assert main(["bake", str(scene), "-o", str(d / "cut.zarr"), "--device", "cpu", "--sh-order", "2"]) == 0
+    from lodprt.store.compress import compress_store
+
+    for source, codec, name in (("full", "f16", "f16"), ("full", "q8", "q8"), ("full", "cpca:4:2", "cpca"),
+                                ("cut", "q8", "cut_q8")):
+        compress_store(d / f"{source}.zarr", d / f"{name}.zarr", codec)
+    env = ["bake-environment", str(scene), "--rays", "16", "--sh-order", "2", "--device", "cpu"]
+    assert main([*env, "-o", str(d / "env.zarr")]) == 0
+    assert main([*env, "-o", str(d / "env_lod.zarr"), "--lod-threshold", "0.05"]) == 0
+    assert main(["bake-volume", "cloud:8", "-o", str(d / "volume.zarr"), "--rays", "8", "--bounces", "0",
+                 "--environment", "sky:16", "--device", "cpu"]) == 0
+    return d
+
+
+def copy_of(pristine, kind: str, tmp_path) -> Path:
+    out = tmp_path / f"{kind}.zarr"
+    shutil.copytree(pristine / f"{kind}.zarr", out)
+    return out
+
+
+def info_damage(capsys, out) -> list[str]:
+    """The damage lines of ``lodprt info`` and ``info --verify`` of ``out`` (the same in both), each exiting 1."""
+    lines = []
+    for verify in ([], ["--verify"]):
+        capsys.readouterr()
+        assert main(["info", str(out), *verify]) == 1, verify
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and "bake it again" in err, err
+        lines.append([ln for ln in err.splitlines() if ": damaged: " in ln])
+    assert lines[0] == lines[1]
+    return lines[0]
+
+
+@pytest.mark.parametrize("kind", ["full", "cut", "f16", "q8", "cpca", "cut_q8", "env", "env_lod", "volume"])
+def test_intact_stores_of_every_kind_pass_info_verify(pristine, capsys, kind):
+    """No store a bake (or compress) writes is called damaged by the checks of the parts and attributes it wrote."""
+    capsys.readouterr()
+    assert main(["info", str(pristine / f"{kind}.zarr"), "--verify", "--json"]) == 0, capsys.readouterr().err
+    assert json.loads(capsys.readouterr().out)["damage"] == []
+
+
+def test_open_arrays_is_the_one_opening_of_reader_damage_and_summary(pristine, tmp_path, monkeypatch):
+    """``reader.open_arrays`` opens the arrays walk found for both ``reader.damage`` and ``FormatStore.summary``
+    (each had its own try/except): an array of a data type zarr does not read is left out of the summary's arrays
+    and named once in its damage."""
+    from lodprt.store import reader
+    from lodprt.store.transfer_store import TransferStore
+
+    out = copy_of(pristine, "env", tmp_path)
+    edit_json(out / "transfer" / "diffuse" / "zarr.json", data_type="bogus")
+    root = zarr.open_group(str(out), mode="r")
+    names = reader.walk(out)[0]
+    opened, problems = reader.open_arrays(root, names)
+    assert sorted(opened) == [n for n in names if n != "transfer/diffuse"]
+    assert len(problems) == 1 and problems[0].startswith("array 'transfer/diffuse': its metadata cannot be read (")
+    calls = []
+    real = reader.open_arrays
+    monkeypatch.setattr(reader, "open_arrays", lambda r, n: calls.append(list(n)) or real(r, n))
+    summary = TransferStore(out).summary()
+    assert calls == [names, names] and "transfer/diffuse" not in summary["arrays"]
+    assert [line for line in summary["damage"] if "transfer/diffuse" in line] == problems
+
+
+@pytest.mark.parametrize("kind, part", [
+    ("full", "samples/00001/coefficients"), ("full", "samples/00000/vertex_ids"), ("full", "scene/object_id"),
+    ("full", "scene/material_id"), ("full", "materials/ks"), ("cut", "samples/00001/dark"),
+    ("cut", "samples/00000/cut_nodes"), ("f16", "samples/00000/coefficients_f16"),
+    ("q8", "samples/00001/band_scales"), ("q8", "samples/00000/vertex_gaps_long"), ("cpca", "codec/basis"),
+    ("cpca", "samples/00000/weights"), ("cut_q8", "samples/00001/cut_levels")])
+def test_a_lost_array_of_a_sample_group_scene_or_codec_is_damage(pristine, tmp_path, capsys, kind, part):
+    """An array the bake (or compress) wrote, deleted whole: a sample's coefficients or ids, its codec's arrays, the
+    cut's, a cpca model's, the scene's ids and the materials: info and info --verify name it, once, and exit 1
+    (they called the store intact, and render then named the missing field)."""
+    out = copy_of(pristine, kind, tmp_path)
+    shutil.rmtree(out / part)
+    assert info_damage(capsys, out) == [f"{out}: damaged: '{part}' is missing"]
+
+
+@pytest.mark.parametrize("kind, part", [
+    ("env", "materials/mirror"), ("env", "transfer/glossy_vertex_ids"), ("env", "scene/material_id"),
+    ("env", "transfer/diffuse"), ("env_lod", "transfer/cut_nodes"), ("env_lod", "hierarchy/parent"),
+    ("env_lod", "transfer/glossy_kept_ids"), ("volume", "volume/density"), ("volume", "transfer/vectors"),
+    ("volume", "environment/coefficients")])
+def test_a_lost_array_of_a_transfer_or_volume_store_is_damage(pristine, tmp_path, capsys, kind, part):
+    """Transfer and volume stores check the arrays their bake wrote too (they had no such check: exit 0)."""
+    out = copy_of(pristine, kind, tmp_path)
+    shutil.rmtree(out / part)
+    assert info_damage(capsys, out) == [f"{out}: damaged: '{part}' is missing"]
+
+
+@pytest.mark.parametrize("kind, group, key", [
+    ("cut", "lights", "box"), ("cut", "hierarchy", "roots"), ("full", "samples/00001", "vertices_kept"),
+    ("full", "", "sh_order"), ("f16", "samples/00000", "scale_exponent"), ("q8", "samples/00001", "band_bits"),
+    ("cpca", "codec", "weight_levels"), ("f16", "", "codec"), ("volume", "volume", "albedo"),
+    ("env", "", "sh_order")])
+def test_a_lost_attribute_is_damage(pristine, tmp_path, capsys, kind, group, key):
+    """A required attribute removed (the light box, the hierarchy's roots, a sample's statistics or its codec's
+    scale, the root's SH order or codec, a volume's albedo): info and info --verify list it as damage and exit 1
+    (info stopped with a one-line error, status 2, or called the store intact)."""
+    out = copy_of(pristine, kind, tmp_path)
+    meta = out / group / "zarr.json"
+    doc = json.loads(meta.read_text())
+    del doc["attributes"][key]
+    meta.write_text(json.dumps(doc))
+    assert info_damage(capsys, out) == [f"{out}: damaged: {group or 'root'}: attribute(s) {key} missing"]
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 1
+    assert f"{group or 'root'}: attribute(s) {key} missing" in json.loads(capsys.readouterr().out)["damage"]
+
+
+def test_a_bogus_or_lost_codec_attribute(pristine, tmp_path, capsys):
+    """A compressed store whose root codec names no codec is damage (it passed info --verify); without the
+    attribute, reading it is a StoreError naming the store and the attribute (it raised KeyError 'coefficients'
+    in Store.coefficients_per_vertex), radiance one line with status 2."""
+    out = copy_of(pristine, "f16", tmp_path)
+    meta = out / "zarr.json"
+    edit_json(meta, attributes={**json.loads(meta.read_text())["attributes"], "codec": "bogus"})
+    assert info_damage(capsys, out) == [f"{out}: damaged: root: attribute codec 'bogus' names no codec this lodprt "
+                                        "reads"]
+    with pytest.raises(StoreError, match=r"f16\.zarr: root: attribute codec 'bogus' names no codec"):
+        open_store(out).sample(0)
+    doc = json.loads(meta.read_text())
+    del doc["attributes"]["codec"]
+    meta.write_text(json.dumps(doc))
+    with pytest.raises(StoreError, match=r"f16\.zarr: root: attribute\(s\) codec missing: the store is damaged"):
+        open_store(out).coefficients_per_vertex
+    capsys.readouterr()
+    assert main(["radiance", str(out), "--sample", "0", "--eye", "0", "1", "3", "-o", str(tmp_path / "r.npy")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and f"{out}: root: attribute(s) codec missing" in err, err

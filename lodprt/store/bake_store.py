@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from lodprt.errors import LodprtError, StoreError
-from lodprt.store.reader import brief, damage, folder_bytes, read_array
+from lodprt.store.codecs import CUT_STRUCTURE_ARRAYS, MODEL_ARRAYS, STRUCTURE_ARRAYS, parse_codec, sample_parts
+from lodprt.store.reader import brief, damage, folder_bytes, missing_attributes, missing_parts, read_array
 from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_format
 
 log = logging.getLogger(__name__)
@@ -19,6 +20,10 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 1
 #: the attributes every sample group records that the readers need (``Store.sample_info`` checks them)
 SAMPLE_ATTRS = ("vertices_kept", "bytes")
+#: the root's, the lights' and the hierarchy's attributes every bake writes and the readers need
+ROOT_ATTRS = ("sh_order", "coefficients_per_vertex", "channels", "ray_offset")
+LIGHTS_ATTRS = ("grid", "box", "intensity", "falloff", "radius")
+HIERARCHY_ATTRS = ("roots", "depth", "seconds")
 #: versions ``Store`` reads: 1 (float32 samples) and 2 (samples encoded by a codec, ``lodprt.store.codecs``)
 READ_VERSIONS = (1, 2)
 
@@ -101,14 +106,38 @@ class Store:
 
     @property
     def sh_order(self) -> int:
-        return int(self.attrs["sh_order"])
+        return int(self.root_attr("sh_order"))
 
     @property
     def coefficients_per_vertex(self) -> int:
         """SH coefficients stored per vertex and channel, read off the arrays: 1 (diffuse-only) or sh_order^2."""
-        if self.codec != "none":
-            return int(self.attrs["coefficients_per_vertex"])
-        return int(self.group(0)["coefficients"].shape[-1])
+        if self.sample_codec() != "none":
+            return int(self.root_attr("coefficients_per_vertex"))
+        return int(self.node(f"{sample_group(self.check_sample(0))}/coefficients").shape[-1])
+
+    def root_attr(self, key: str):
+        """The root attribute ``key``; StoreError calling the store damaged when it is gone."""
+        return self.required_attrs("root", self.attrs, (key,))[key]
+
+    def sample_codec(self) -> str:
+        """The codec of the light samples ("none" in version 1); StoreError calling the store damaged when a
+        version-2 store's root attribute ``codec`` is gone or names no codec."""
+        problem = self.codec_problem()
+        if problem:
+            raise self.damaged(problem)
+        return self.codec
+
+    def codec_problem(self) -> str | None:
+        """What is wrong with a version-2 store's root attribute ``codec`` (gone, or no codec's name), or None."""
+        if self.attrs.get("format_version") != 2:
+            return None
+        if "codec" not in self.attrs:
+            return "root: attribute(s) codec missing"
+        try:
+            parse_codec(self.attrs["codec"], "codec")
+        except LodprtError:
+            return f"root: attribute codec {self.attrs['codec']!r} names no codec this lodprt reads"
+        return None
 
     @property
     def light_positions(self) -> np.ndarray:
@@ -139,7 +168,7 @@ class Store:
     def sample(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Vertex ids (K,) int32 and coefficients (K, C, ncoef) float32 of light sample ``k``."""
         g = sample_group(self.check_sample(k))
-        if self.codec != "none":  # version 2: decoded afresh each call (lodprt.store.codecs, C-1..C-4)
+        if self.sample_codec() != "none":  # version 2: decoded afresh each call (lodprt.store.codecs, C-1..C-4)
             from lodprt.store.codecs import read_sample
 
             return read_sample(self, k)[:2]
@@ -148,7 +177,7 @@ class Store:
     def cut_arrays(self, k: int) -> dict:
         """{"cut_nodes", "dark"} of sample ``k`` of a light-cut store (decoded in version 2), {} in full mode."""
         g = sample_group(self.check_sample(k))
-        if self.codec != "none":
+        if self.sample_codec() != "none":
             from lodprt.store.codecs import read_cut
 
             return read_cut(self, k)
@@ -321,7 +350,7 @@ class Store:
         out["light_box"] = [float(x) for x in self.light_box]
         out["samples"] = samples
         if self.has_hierarchy:
-            g = self.required_attrs("hierarchy", self.node("hierarchy").attrs, ("roots", "depth", "seconds"))
+            g = self.required_attrs("hierarchy", self.node("hierarchy").attrs, HIERARCHY_ATTRS)
             out["hierarchy_nodes"] = int(self.node("hierarchy/parent").shape[0])
             out["hierarchy_roots"] = int(g["roots"])
             out["hierarchy_depth"] = int(g["depth"])
@@ -339,23 +368,58 @@ class Store:
 
     def damage(self, *, verify: bool = False) -> list[str]:
         """What is damaged in this store, one line each (``reader.damage``: metadata garbled or gone, chunk files
-        missing, and with ``verify`` every array read whole), and every part its bake wrote that is gone."""
+        missing, and with ``verify`` every array read whole), every part and attribute its bake wrote that is gone,
+        and a version-2 store's ``codec`` attribute gone or of no known codec."""
         found = damage(self.root, self.path, all_chunks=bool(self.attrs.get(ALL_CHUNKS)), verify=verify)
-        return found + [f"'{name}' is missing" for name in self.required_parts() if not (self.path / name).is_dir()]
+        problem = self.codec_problem()
+        found += [problem] if problem else []
+        return (found + missing_parts(self.path, self.required_parts())
+                + missing_attributes(self.root, self.required_attributes()))
+
+    def samples_written(self) -> int:
+        """Light samples the bake wrote (0 when the light positions are gone or garbled: named by ``damage``)."""
+        try:
+            return self.num_samples
+        except StoreError:
+            return 0
+
+    def sample_layout(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(arrays, attributes) every light sample's group holds: its codec's (``codecs.sample_parts``; only the
+        structure arrays when a version-2 store's codec is unknown) and ``SAMPLE_ATTRS``."""
+        cut = self.attrs.get("mode") == "cut"
+        if self.codec_problem():  # the codec is unknown: the arrays of every version-2 sample only
+            return STRUCTURE_ARRAYS + (CUT_STRUCTURE_ARRAYS if cut else ()), SAMPLE_ATTRS
+        arrays, attrs = sample_parts(self.codec, cut=cut)
+        return arrays, SAMPLE_ATTRS + attrs
 
     def required_parts(self) -> list[str]:
-        """The arrays and groups every bake of this store's kind writes: the scene, the lights, each light sample's
-        group (when the light positions can be read) and the hierarchy when the bake built one."""
+        """The arrays and groups every bake of this store's kind writes: the scene, materials and lights, each
+        light sample's group and the arrays its codec writes there (when the light positions can be read), a cpca
+        store's model and the hierarchy when the bake built one."""
         from lodprt.model.hierarchy import Hierarchy
 
-        parts = ["scene/positions", "scene/normals", "scene/faces", "lights/positions"]
-        try:
-            parts += [sample_group(k) for k in range(self.num_samples)]
-        except StoreError:  # the light positions are gone or garbled: named above, the samples cannot be counted
-            pass
+        parts = ["scene/positions", "scene/normals", "scene/faces", "scene/material_id", "scene/object_id",
+                 "materials/kd", "materials/ks", "materials/shininess", "lights/positions"]
+        arrays = self.sample_layout()[0]
+        for k in range(self.samples_written()):
+            parts += [sample_group(k)] + [f"{sample_group(k)}/{name}" for name in arrays]
+        if not self.codec_problem() and self.codec.startswith("cpca"):
+            parts += [f"codec/{name}" for name in MODEL_ARRAYS]
         if self.has_hierarchy:
             parts += [f"hierarchy/{name}" for name in Hierarchy.ARRAYS]
         return parts
+
+    def required_attributes(self) -> list[tuple[str, tuple[str, ...]]]:
+        """(group, "" for the root; the attributes of it every bake writes and the readers need): the root's, the
+        lights', every sample group's, a cpca store's ``codec`` group's and the hierarchy's when there is one."""
+        attrs = self.sample_layout()[1]
+        wanted = [("", ROOT_ATTRS), ("lights", LIGHTS_ATTRS)]
+        wanted += [(sample_group(k), attrs) for k in range(self.samples_written())]
+        if not self.codec_problem() and self.codec.startswith("cpca"):
+            wanted.append(("codec", ("weight_levels",)))
+        if self.has_hierarchy:
+            wanted.append(("hierarchy", HIERARCHY_ATTRS))
+        return wanted
 
 
 def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:

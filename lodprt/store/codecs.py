@@ -47,6 +47,15 @@ CPCA_ROUNDS = 3
 GAP_ESCAPE = 255
 #: rows per block of the cpca distance computations (bounds memory to a few tens of MB)
 BLOCK_ROWS = 1 << 14
+#: what each codec kind writes in every sample group: (arrays, attributes) of its coefficients (C-1..C-3)
+CODEC_PARTS = {"none": (("coefficients",), ()), "f16": (("coefficients_f16",), ("scale_exponent",)),
+               "q": (("coefficients_q", "band_scales"), ("scale_exponent", "band_bits")),
+               "cpca": (("cluster", "weights"), ())}
+#: a sample's structure arrays (C-4) in every version-2 store, and those added in a light-cut store
+STRUCTURE_ARRAYS = ("vertex_gaps", "vertex_gaps_long")
+CUT_STRUCTURE_ARRAYS = ("cut_levels", "dark_bits")
+#: the store-level cpca arrays under ``codec/`` (their group's attribute: ``weight_levels``)
+MODEL_ARRAYS = ("mean", "basis", "weight_scale")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,6 +109,16 @@ def check_layout(codec: Codec, channels: int, ncoef: int, option: str = "--codec
     if codec.kind == "cpca" and codec.vectors > channels * ncoef:
         raise LodprtError(f"{option} {codec.name}: VECTORS {codec.vectors} exceeds the {channels * ncoef} "
                           f"coefficients of a vertex in this store ({channels} channel(s) x {ncoef})")
+
+
+def sample_parts(codec: str, *, cut: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(arrays, attributes) every sample group of a store of ``codec`` holds ("none": version 1's arrays): its
+    vertex ids or structure arrays, those of the light cut when ``cut``, and the codec's own."""
+    kind = parse_codec(codec, "codec").kind
+    arrays, attrs = CODEC_PARTS[kind]
+    if kind == "none":
+        return ("vertex_ids", *arrays, *(("cut_nodes", "dark") if cut else ())), attrs
+    return (*STRUCTURE_ARRAYS, *(CUT_STRUCTURE_ARRAYS if cut else ()), *arrays), attrs
 
 
 # -- helpers: float16 with a power-of-two scale, bands --------------------------------------------------------

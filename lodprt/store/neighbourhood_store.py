@@ -64,6 +64,11 @@ class NeighbourhoodStore(FormatStore):
             if key not in self.attrs:
                 raise StoreError(f"{self.path}: root attribute '{key}' is missing")
 
+    def required_parts(self) -> list[str]:
+        """The arrays ``write_neighbourhood_store`` writes: the grid's matrices and O's geometry and transfer."""
+        return super().required_parts() + ["grid/matrices"] + [
+            f"object/{name}" for name in ("positions", "normals", "faces", "albedo", "transfer")]
+
     @property
     def lo(self) -> np.ndarray:
         return np.asarray(self.attrs["lo"], np.float64)

@@ -91,15 +91,49 @@ def damage(root, path: Path, *, all_chunks: bool, verify: bool = False) -> list[
     ``verify``, every array read whole, so a garbled chunk is found too (``lodprt info --verify``). Empty when
     nothing is."""
     arrays, found = walk(path)
-    for name in arrays:
-        try:
-            arr = root[name]
-        except Exception as exc:  # noqa: BLE001 -- JSON that zarr's metadata rejects (a data type it does not know)
-            found.append(f"array '{name}': its metadata cannot be read ({brief(exc)})")
-            continue
+    opened, problems = open_arrays(root, arrays)
+    found += problems
+    for name, arr in opened.items():
         problem = check_array(arr, all_chunks=all_chunks, read=verify)[1]
         if problem:
             found.append(f"array '{name}': {problem}")
+    return found
+
+
+def open_arrays(root, names) -> tuple[dict, list[str]]:
+    """({name: zarr array} of the ``names`` (``walk``'s) of the zarr group ``root`` that open; one line for each
+    whose metadata zarr rejects, a data type it does not know, say)."""
+    opened, problems = {}, []
+    for name in names:
+        try:
+            opened[name] = root[name]
+        except Exception as exc:  # noqa: BLE001 -- JSON that zarr's metadata rejects: ValueError, TypeError, ...
+            problems.append(f"array '{name}': its metadata cannot be read ({brief(exc)})")
+    return opened, problems
+
+
+def missing_parts(path: Path, names) -> list[str]:
+    """One line per part of ``names`` (arrays or groups of the store at ``path``, a group before its arrays) whose
+    folder is gone; the arrays of a group already named are not named again."""
+    gone: list[str] = []
+    for name in names:
+        if not (path / name).is_dir() and not any(name.startswith(g + "/") for g in gone):
+            gone.append(name)
+    return [f"'{name}' is missing" for name in gone]
+
+
+def missing_attributes(root, wanted) -> list[str]:
+    """One line per group of ``wanted`` ((group path, "" for the root; attribute names)) of the zarr group ``root``
+    that lacks some of its attributes; a group that is gone or garbled is left to ``walk`` and ``missing_parts``."""
+    found = []
+    for where, keys in wanted:
+        try:
+            attrs = root.attrs if not where else root[where].attrs
+        except Exception:  # noqa: BLE001, S112 -- gone or its zarr.json garbled: named by the other checks
+            continue
+        lost = [key for key in keys if key not in attrs]
+        if lost:
+            found.append(f"{where or 'root'}: attribute(s) {', '.join(lost)} missing")
     return found
 
 
@@ -161,15 +195,25 @@ class FormatStore:
                 return f"{len(v)} values"
             return v if isinstance(v, (str, int, float, bool, list, tuple, dict)) or v is None else str(v)
 
-        arrays = {}
-        for name in walk(self.path)[0]:
-            try:
-                arr = self.root[name]
-            except Exception:  # noqa: BLE001, S112 -- metadata zarr rejects: ``damage`` names it
-                continue
-            arrays[name] = {"shape": list(arr.shape), "dtype": str(arr.dtype)}
+        opened = open_arrays(self.root, walk(self.path)[0])[0]  # metadata zarr rejects: ``damage`` names it
+        arrays = {name: {"shape": list(arr.shape), "dtype": str(arr.dtype)} for name, arr in opened.items()}
         return {"store": str(self.path), "kind": self.WHAT, "format": self.FORMAT,
                 "format_version": self.attrs.get("format_version"), "baked_by": self.BAKE,
                 "attrs": {k: plain(v) for k, v in sorted(self.attrs.items()) if k not in ("format", "format_version")},
-                "arrays": arrays, "bytes_on_disk": folder_bytes(self.path),
-                "damage": damage(self.root, self.path, all_chunks=bool(self.attrs.get(ALL_CHUNKS)), verify=verify)}
+                "arrays": arrays, "bytes_on_disk": folder_bytes(self.path), "damage": self.damage(verify=verify)}
+
+    def damage(self, *, verify: bool = False) -> list[str]:
+        """What is damaged in this store, one line each: ``damage`` (metadata garbled or gone, chunk files missing,
+        with ``verify`` every array read whole), every part and attribute its bake wrote that is gone."""
+        found = damage(self.root, self.path, all_chunks=bool(self.attrs.get(ALL_CHUNKS)), verify=verify)
+        return (found + missing_parts(self.path, self.required_parts())
+                + missing_attributes(self.root, self.required_attributes()))
+
+    def required_parts(self) -> list[str]:
+        """The arrays every bake of this kind writes (subclasses add theirs to these): the lighting's coefficients
+        when the bake stored one (its ``environment`` group is there)."""
+        return ["environment/coefficients"] if (self.path / "environment").is_dir() else []
+
+    def required_attributes(self) -> list[tuple[str, tuple[str, ...]]]:
+        """(group, "" for the root; the attributes of it that every bake of this kind writes and readers need)."""
+        return [("", ("sh_order",))]

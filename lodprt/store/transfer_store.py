@@ -114,6 +114,23 @@ class TransferStore(FormatStore):
 
     FORMAT, VERSIONS, WHAT, BAKE = TRANSFER_FORMAT, READABLE_VERSIONS, WHAT, "lodprt bake-environment"
 
+    def required_parts(self) -> list[str]:
+        """The arrays ``write_transfer_store`` writes for this store's settings: the geometry, materials and diffuse
+        transfer always; ``materials/mirror`` from version 2; the glossy matrices when ``glossy_order`` says the bake
+        made some; with ``lod_threshold`` the cut, the hierarchy and (version 2) ``glossy_kept_ids``."""
+        from lodprt.model.hierarchy import Hierarchy
+
+        v2 = (self.attrs.get("format_version") or 1) >= 2
+        parts = super().required_parts() + [
+            "scene/positions", "scene/normals", "scene/faces", "scene/material_id", "materials/kd", "materials/ks",
+            "materials/shininess", "transfer/diffuse", "transfer/glossy_vertex_ids"]
+        parts += ["materials/mirror"] if v2 else []
+        parts += ["transfer/glossy"] if self.attrs.get("glossy_order") is not None else []
+        if self.attrs.get("lod_threshold") is not None:
+            parts += ["transfer/vertex_ids", "transfer/cut_nodes"] + (["transfer/glossy_kept_ids"] if v2 else [])
+            parts += [f"hierarchy/{name}" for name in Hierarchy.ARRAYS]
+        return parts
+
     def diffuse(self) -> np.ndarray:
         """(V, 3, n*n) diffuse transfer of every vertex; a LOD store's missing vertices are completed (T-15)."""
         if not hasattr(self, "_diffuse"):

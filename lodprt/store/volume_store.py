@@ -57,6 +57,14 @@ class VolumeStore(FormatStore):
 
     FORMAT, VERSIONS, WHAT, BAKE = VOLUME_FORMAT, (VOLUME_FORMAT_VERSION,), WHAT, "lodprt bake-volume"
 
+    def required_parts(self) -> list[str]:
+        """The arrays ``write_volume_store`` writes: the density and the transfer vectors."""
+        return super().required_parts() + ["volume/density", "transfer/vectors"]
+
+    def required_attributes(self) -> list[tuple[str, tuple[str, ...]]]:
+        """The root's and the ``volume`` group's attributes (its box and albedo)."""
+        return super().required_attributes() + [("volume", ("lo", "hi", "albedo"))]
+
     def volume(self):
         """The baked :class:`lodprt.model.volume.Volume` (density, box, albedo)."""
         from lodprt.model.volume import Volume
