@@ -3,6 +3,8 @@ and a float64 march, the scattering pass against numpy, energy across bounces, t
 
 import json
 
+import re
+
 import numpy as np
 import pytest
 
@@ -157,6 +159,11 @@ def test_volume_store_round_trip(tmp_path):
         bake_volume(vol, tmp_path / "x.txt", sh_order=2, rays=8, bounces=0, device="cpu", overwrite=True)
     with pytest.raises(LodprtError, match="not a lodprt volume store"):
         open_volume(tmp_path / "x.txt")
+    import zarr  # a bad value the store holds is named by the store, not by the file the bake read (cloud:8)
+
+    zarr.open_group(str(out), mode="r+")["volume"].attrs["albedo"] = [2.0, 0.5, 0.5]
+    with pytest.raises(LodprtError, match=rf"^{re.escape(str(out))}: volume: albedo must be one number or three"):
+        open_volume(out).volume()
 
 
 def test_load_volume_files_and_errors(tmp_path):

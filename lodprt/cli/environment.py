@@ -228,12 +228,12 @@ def render_environment(store_path, out, *, eye, environment: str | None = None, 
     import numpy as np
 
     from lodprt.display.environment_render import open_relit, save_png
-    from lodprt.runtime.environment_relight import rotated_lighting
+    from lodprt.runtime.environment_relight import rotated_lighting, stored_or_given_lighting
 
     out = cli_args.require_suffix(out, ".png")
     cli_args.at_least("--frames", frames, 1)
     store, draw = open_relit(store_path, receiver=receiver, at=at)  # a neighbourhood store draws its receiver
-    lighting = _lighting(store, store_path, environment)
+    lighting = stored_or_given_lighting(store, store_path, environment)
     from lodprt.model.windowing import apply_window, choose_window
 
     choice = choose_window(lighting, window, width=window_width)  # before any turn: W-1 commutes with P-4
@@ -253,14 +253,3 @@ def render_environment(store_path, out, *, eye, environment: str | None = None, 
           + f": environment turned {rotate:g} deg" + (f" + 360/{frames} per frame" if len(paths) > 1 else "")
           + (f"; {choice.describe()}" if window != "none" else ""))
     return 0
-
-
-def _lighting(store, store_path, environment):
-    """The lighting coefficients: of ``environment`` when given, else the ones the bake stored."""
-    from lodprt.model.environment import load_environment
-
-    if environment:
-        return load_environment(environment).project(store.order)
-    if store.has("environment/coefficients"):
-        return store.read("environment/coefficients")
-    raise LodprtError(f"{store_path}: the bake stored no environment; pass --environment ENV")

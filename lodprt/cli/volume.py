@@ -138,7 +138,7 @@ def cmd_bake_volume(args) -> int:
 
 def cmd_render_volume(args) -> int:
     from lodprt.display.volume_render import render_volume, save_png
-    from lodprt.runtime.environment_relight import rotated_lighting
+    from lodprt.runtime.environment_relight import rotated_lighting, stored_or_given_lighting
     from lodprt.runtime.volume_relight import open_volume
 
     cli_args.check_picture(args.fov, args.white, args.background)
@@ -152,16 +152,6 @@ def cmd_render_volume(args) -> int:
           f"pixels, environment turned {args.rotate:g} deg")
     return 0
 
-
-def stored_or_given_lighting(store, store_path, environment):
-    """The lighting coefficients (3, n^2): of ``environment`` when given, else the ones the bake stored."""
-    from lodprt.model.environment import load_environment
-
-    if environment:
-        return load_environment(environment).project(store.order)
-    if store.has("environment/coefficients"):
-        return store.read("environment/coefficients")
-    raise LodprtError(f"{store_path}: the bake stored no environment; pass --environment ENV")
 
 
 def cmd_bake_neighbourhood(args) -> int:

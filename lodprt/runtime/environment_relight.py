@@ -13,12 +13,21 @@ at order 3 is a few milliseconds for the diffuse part.
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from lodprt.model import sh
-from lodprt.model.environment import rotate_lighting, rotation_about_y
+from lodprt.model.environment import load_environment, rotate_lighting, rotation_about_y
 from lodprt.errors import LodprtError
+
+
+def stored_or_given_lighting(store, store_path, environment) -> np.ndarray:
+    """The lighting coefficients (3, n^2) of a transfer or volume ``store`` (at ``store_path``): of the map
+    ``environment`` when given, else the ones its bake stored."""
+    if environment:
+        return load_environment(environment).project(store.order)
+    if store.has("environment/coefficients"):
+        return store.read("environment/coefficients")
+    raise LodprtError(f"{store_path}: the bake stored no environment; pass --environment ENV")
 
 
 def rotated_lighting(coeffs, degrees: float = 0.0) -> np.ndarray:

@@ -71,8 +71,9 @@ class VolumeStore(FormatStore):
 
         a = dict(self.root["volume"].attrs)
         try:
+            # named by the store that holds the values (the bake's source file, where they were read, is not)
             return Volume(self.read("volume/density"), np.array(a["lo"]), np.array(a["hi"]), np.array(a["albedo"]),
-                          str(self.attrs.get("source", self.path)))
+                          f"{self.path}: volume")
         except KeyError as exc:
             raise StoreError(f"{self.path}: volume attribute {exc} is missing") from exc
 
