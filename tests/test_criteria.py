@@ -129,7 +129,7 @@ def parse(*argv):
 
 def test_cli_options_make_the_criterion():
     """``--criterion thesis --alpha 0.3`` makes ThesisCriterion(0.25, 0.3); ``--alpha`` with the screen criterion is
-    accepted and unread (as before the objects); ``--target-psnr`` with 'thesis' is refused naming it."""
+    accepted and unread (as before the objects), though checked; ``--target-psnr`` with 'thesis' is refused naming it."""
     assert parse("--criterion", "thesis", "--alpha", "0.3") == ThesisCriterion(0.25, alpha=0.3)
     assert parse("--criterion", "thesis", "--error-bound", "0.1") == ThesisCriterion(0.1, alpha=0.6)
     assert parse() == ScreenCriterion()
@@ -137,8 +137,9 @@ def test_cli_options_make_the_criterion():
     assert parse("--target-psnr", "38", "--error-bound", "0.5") == ScreenCriterion(0.5, target_psnr=38.0)
     with pytest.raises(LodprtError, match="target_psnr 38.0: .*not with criterion 'thesis'"):
         parse("--criterion", "thesis", "--target-psnr", "38")
-    with pytest.raises(LodprtError, match="alpha 1.5: must lie in"):
-        parse("--criterion", "thesis", "--alpha", "1.5")
+    for criterion in ("thesis", "screen"):  # unread by 'screen', yet checked: --alpha 7 was taken
+        with pytest.raises(LodprtError, match="alpha 1.5: must lie in"):
+            parse("--criterion", criterion, "--alpha", "1.5")
     with pytest.raises(SystemExit):  # argparse refuses a name the registry does not hold
         parse("--criterion", "nope")
 

@@ -468,9 +468,13 @@ def test_bad_settings_are_refused(store, rt):
 ])
 def test_bad_camera_planes_and_fov_are_refused(rt, field, bad):
     """A lone near of 0, below 0 or NaN, a non-finite far and a fov that is no number (a string, a bool) are
-    refused where Camera checks its fields, naming the field; Runtime.set_camera the same."""
+    refused where Camera checks its fields, naming the field; Runtime.set_camera the same (where a field None is
+    Camera's default)."""
     with pytest.raises(LodprtError, match=f"camera {field}"):
         Camera(eye=(0, 0, 1), target=(0, 0, 0), **{field: bad})
+    if bad is None:
+        assert rt.set_camera((0, 0.3, 0.6), (0, 0.1, 0), **{field: bad}).fov == Camera((0, 0, 1), (0, 0, 0)).fov
+        return
     with pytest.raises(LodprtError, match=f"camera {field}"):
         rt.set_camera((0, 0.3, 0.6), (0, 0.1, 0), **{field: bad})
 
@@ -664,3 +668,59 @@ def test_lod_off_reports_no_estimate(bunny_bake):
     assert frame.stats["estimated_psnr_db"] is None and frame.stats["estimate_stride_px"] is None
     rt.set_lod(True)
     assert rt.update().stats["estimated_psnr_db"] is not None
+
+
+def test_runtime_takes_a_path_and_names_what_is_no_store(store, tmp_path):
+    """``Runtime("bake.zarr")`` opens the store (it raised AttributeError 'str' object has no attribute
+    'hierarchy'); a thing that is no store is a LodprtError; a volume store is named as one (it was 'not a lodprt
+    store', though info reads it)."""
+    from lodprt.model.volume import procedural_volume
+    from lodprt.precompute.volume import bake_volume
+
+    by_path = Runtime(str(store.path), device="cpu")
+    assert by_path.h.num_nodes == store.hierarchy().num_nodes
+    for bad in (None, 42):
+        with pytest.raises(LodprtError, match="not a bake store; pass lodprt.open_store"):
+            Runtime(bad, device="cpu")
+    vol = tmp_path / "v.zarr"
+    bake_volume(procedural_volume("cloud:4"), vol, sh_order=1, rays=4, bounces=0, device="cpu")
+    with pytest.raises(LodprtError, match="a volume store .*render-volume, not with the point-light commands"):
+        Runtime(str(vol), device="cpu")
+
+
+def test_a_running_runtime_changes_only_its_criterions_bound_and_alpha(store):
+    """``rt.criterion = 'thesis'`` was kept and the next update raised AttributeError; another kind or target would
+    run without the per-node bounds and the steering it needs. The bound (and alpha) may change, and forget M-7's
+    splits."""
+    from lodprt.runtime.criteria import ScreenCriterion, ThesisCriterion
+
+    rt = Runtime(store, device="cpu", triangle_budget=500)
+    for bad in ("thesis", ThesisCriterion(), ScreenCriterion(), ScreenCriterion(0.8, target_psnr=30.0), None):
+        with pytest.raises(LodprtError, match="criterion"):
+            rt.criterion = bad
+    rt.criterion = rt.criterion.with_bound(2.0)
+    assert rt.error_bound == 2.0 and rt.target_psnr is None
+    thesis = Runtime(store, device="cpu", criterion="thesis")
+    thesis.criterion = thesis.criterion.with_bound(0.5).with_alpha(0.2)
+    assert (thesis.error_bound, thesis.alpha) == (0.5, 0.2)
+
+
+def test_fields_beside_a_camera_replace_its_own(rt):
+    """``set_camera(camera, width=64)`` returned the camera at its own 320 x 240, the width dropped silently."""
+    cam = orbit_camera(rt, 0.2)
+    got = rt.set_camera(cam, width=64, fov=50.0, far=20.0)
+    assert (got.width, got.height, got.fov, got.far, got.eye) == (64, 240, 50.0, 20.0, cam.eye)
+    assert rt.set_camera(cam) == cam and rt.camera == cam
+    with pytest.raises(LodprtError, match="camera size"):
+        rt.set_camera(cam, height=0)
+
+
+def test_a_very_distant_light_warns_once_without_numpy(rt):
+    """A light at 1e300 is clamped into the box with lodprt's warning; numpy's overflow warning (np.round of the
+    points) no longer leaks onto the user's screen."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        rt.set_lights([(1e300, 0.3, 0.0)])
+    assert np.isfinite(rt.light_positions).all()

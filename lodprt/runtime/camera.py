@@ -82,35 +82,28 @@ def clip_planes(view_proj: np.ndarray) -> np.ndarray:
     return np.where(n > 0, planes / np.where(n > 0, n, 1.0), np.array([0.0, 0.0, 0.0, 1.0]))
 
 
-def as_camera(camera=None, **kw) -> Camera:
-    if isinstance(camera, Camera):
-        if kw:
-            raise LodprtError("set_camera: pass either a Camera or its fields, not both")
-        return camera
-    if camera is not None:
-        kw["eye"] = camera
-    try:
-        return Camera(**kw)
-    except TypeError as exc:
-        raise LodprtError(f"set_camera: {exc}") from exc
-
-
 def camera_for(camera=None, *, eye=None, target=None, default_target=None, **fields) -> Camera:
     """What ``set_camera`` takes: a ``Camera``, or its fields with the eye positional (``camera``) or ``eye=``;
-    ``target`` None is ``default_target`` (the scene's centre, as on the command line)."""
+    ``target`` None is ``default_target`` (the scene's centre, as on the command line). Fields None are
+    ``Camera``'s defaults; beside a ``Camera``, the fields given replace its own (its eye and target stay)."""
+    fields = {k: v for k, v in fields.items() if v is not None}
     if isinstance(camera, Camera):
         if eye is not None or target is not None:
-            raise LodprtError("set_camera: pass either a Camera or its fields (eye, target, ...), not both")
-        return camera
-    if camera is not None and eye is not None:
+            raise LodprtError("set_camera: pass either a Camera or its eye and target, not both")
+        eye, make = camera, dataclasses.replace  # the fields given replace its own (width=64 was dropped)
+    elif camera is not None and eye is not None:
         raise LodprtError("set_camera: the eye given twice (positional and eye=)")
-    eye = camera if eye is None else eye
-    if eye is None:
-        raise LodprtError("set_camera: give the eye (set_camera(eye=(x, y, z))) or a Camera")
-    target = default_target if target is None else target
-    if target is None:
-        raise LodprtError("set_camera: give the target (no scene centre to default to)")
-    return as_camera(eye, target=target, **fields)
+    else:
+        eye, target, make = camera if eye is None else eye, default_target if target is None else target, Camera
+        if eye is None:
+            raise LodprtError("set_camera: give the eye (set_camera(eye=(x, y, z))) or a Camera")
+        if target is None:
+            raise LodprtError("set_camera: give the target (no scene centre to default to)")
+        fields["target"] = target
+    try:
+        return make(eye, **fields)
+    except TypeError as exc:  # a field Camera has not
+        raise LodprtError(f"set_camera: {exc}") from exc
 
 
 def view_projection(camera: Camera, bounds: np.ndarray) -> np.ndarray:

@@ -205,6 +205,25 @@ CRITERIA: dict[str, type[Criterion]] = {"screen": ScreenCriterion, "thesis": The
 DEFAULT_ERROR_BOUND = {name: cls().error_bound for name, cls in CRITERIA.items()}
 
 
+#: the check of each setting a criterion accepts and does not read (``IGNORES``)
+IGNORED_CHECKS: dict[str, typing.Callable] = {"alpha": check_alpha}
+
+
+def retuned(old: Criterion, new) -> Criterion:
+    """``new``, when it is ``old`` with another bound or alpha (what a running ``Runtime`` may change: the steering,
+    the budgets, ``set_error_bound``); otherwise LodprtError: its kind and other settings are fixed when made, with
+    the per-node bounds and the steering they need."""
+    if not isinstance(new, Criterion):
+        raise LodprtError(f"criterion {new!r}: a running Runtime's criterion is a Criterion object; choose its kind "
+                          "when making the Runtime (set_error_bound changes its bound and alpha)")
+    other = dataclasses.replace(new, error_bound=old.error_bound)
+    if type(new) is not type(old) or other.with_alpha(getattr(old, "alpha", 0.0)) != old:
+        raise LodprtError(f"criterion ({new.describe()}): a running Runtime "
+                          "changes only its criterion's bound and alpha (set_error_bound); make another Runtime for "
+                          "another criterion or target")
+    return new
+
+
 def make_criterion(name: str = "screen", **settings) -> Criterion:
     """The criterion ``name`` with ``settings`` (None: its default). A setting another criterion reads but this one
     does not is refused (LodprtError naming it), unless this one lists it in ``IGNORES``; an unknown one too."""
@@ -215,7 +234,10 @@ def make_criterion(name: str = "screen", **settings) -> Criterion:
     known = {f.name for c in CRITERIA.values() for f in dataclasses.fields(c)}
     kept = {}
     for key, value in settings.items():
-        if value is None or (key in cls.IGNORES and key not in own):
+        if value is None:
+            continue
+        if key in cls.IGNORES and key not in own:
+            IGNORED_CHECKS[key](value)  # unread, yet in its range: --alpha 7 with 'screen' was taken
             continue
         if key not in known:
             raise LodprtError(f"{key}: not a setting of any view-cut criterion ({', '.join(sorted(known))})")

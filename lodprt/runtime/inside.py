@@ -60,7 +60,8 @@ class InsideCheck:
         returns the (position, object) pairs found (empty once ``what`` was warned about, or for the same points as
         the last call)."""
         pts = np.asarray(points, np.float64).reshape(-1, 3)
-        key = tuple(np.round(pts, 12).ravel())
+        with np.errstate(over="ignore"):  # |x| past ~1e296 (clamped below): no numpy warning on the user's screen
+            key = tuple(np.round(pts, 12).ravel())
         if what in self.warned or self.checked.get(what) == key:
             return []
         self.checked[what] = key

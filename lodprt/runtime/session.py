@@ -29,7 +29,7 @@ from lodprt.launches import ROWS_MIN, KernelThreads
 from lodprt.runtime import frame_error, node_bounds
 from lodprt.runtime.node_bounds import NodeErrors, scaled_error_vectors
 from lodprt.runtime.budgets import FrameBudgets
-from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion
+from lodprt.runtime.criteria import Criterion, ThesisCriterion, resolve_criterion, retuned
 from lodprt.runtime.camera import Camera, camera_for, camera_jump, clip_planes, scene_centre, view_projection
 from lodprt.runtime.device_inputs import host_array
 from lodprt.runtime.frames import Frame
@@ -41,13 +41,13 @@ from lodprt.runtime.samples import default_white
 from lodprt.runtime.shadow_edges import follow_shadow_edges
 from lodprt.runtime.triangulation import CutMesh
 from lodprt.runtime.view_cut import Cut
+from lodprt.store.bake_store import as_store
 
 log = logging.getLogger(__name__)
 
 #: a camera move of more than JUMP of its distance to the target, or a change of the light weights by more than
 #: LIGHT_JUMP of their sum, counts as a jump
-JUMP = 0.1
-LIGHT_JUMP = 0.4
+JUMP, LIGHT_JUMP = 0.1, 0.4
 #: E-4's rounds on the first frame with a target_psnr, and E-5's rounds of pins on it and a still one (each
 #: converges the cut)
 FIRST_ROUNDS = 12
@@ -105,7 +105,7 @@ class Runtime:
         self.steering = frame_error.Steering(self.criterion.target_psnr, STEER_STEP) if self.criterion.steered() \
             else None
         self.device = resolve_device(device)
-        self.store = store
+        self.store = store = as_store(store)  # a path is opened
         self.h = h = store.hierarchy()
         # the store's own arrays (read once, kept on the Store), float32 and int32: one copy of the geometry serves
         # the frames, the kernels (wrapped, not copied, on the CPU) and the direct light's BVH (docs/SCALE.md)
@@ -129,10 +129,9 @@ class Runtime:
         if not self.white > 0 or not math.isfinite(self.white):
             raise LodprtError(f"white {white}: must be a positive finite radiance")
         self._synced = -1  # the sample cache's version the device arrays hold
-        # per-node geometry for the error terms (float32: what the kernels read; a node's position is its vertex's,
-        # gathered through h.vertex in the kernels and in ``node_pos``, not stored per node).
-        # S-3: the error vector's direction at the subtree's accumulated deviation (one collapse's vector measures
-        # one step; a coarse node stands for all the steps under it)
+        # per-node geometry for the error terms (float32, as the kernels read it; a node stands at its vertex, through
+        # h.vertex, not stored per node); S-3: the error vector's direction at the subtree's accumulated deviation
+        # (one collapse's vector measures one step; a coarse node stands for all the steps under it)
         self._levels = node_bounds.height_levels(h)
         self.error_vector = scaled_error_vectors(h, node_bounds.subtree_deviation(h, self._levels))
         self.axis = np.ascontiguousarray(h.cone_axis, np.float32)
@@ -270,8 +269,8 @@ class Runtime:
 
     @criterion.setter
     def criterion(self, new: Criterion) -> None:
-        if new != self._criterion:  # M-7: another bound (B-1, B-2, E-4, E-5) or alpha: other decisions
-            self.refinement.forget_splits()
+        if (new := retuned(self._criterion, new)) != self._criterion:  # only its bound and alpha change once made
+            self.refinement.forget_splits()  # M-7: another bound (B-1, B-2, E-4, E-5) or alpha: other decisions
         self._criterion = new
 
     @property
@@ -327,9 +326,10 @@ class Runtime:
         self.light_positions, self.light_colors, self.lights_clamped = lit.positions, lit.colors, lit.clamped
         self.sample_weights, self.used_samples, self.used_slots = W, lit.used_samples, lit.used_slots
 
-    def set_camera(self, camera=None, target=None, up=(0.0, 1.0, 0.0), fov=40.0, width=800, height=600,
-                   near=None, far=None, *, eye=None) -> Camera:
-        """A ``Camera`` or its fields (the eye positional or ``eye=``); ``target`` None: the scene's centre, as the CLI."""
+    def set_camera(self, camera=None, target=None, up=None, fov=None, width=None, height=None, near=None, far=None, *,
+                   eye=None) -> Camera:
+        """A ``Camera`` or its fields (the eye positional or ``eye=``; None: ``Camera``'s default, or beside a
+        ``Camera`` its own); ``target`` None: the scene's centre, as the CLI."""
         old = self.camera
         if self._centre is None and target is None and not isinstance(camera, Camera):
             self._centre = scene_centre(self.store)

@@ -13,7 +13,8 @@ import numpy as np
 from lodprt.errors import LodprtError, StoreError
 from lodprt.store.codecs import CUT_STRUCTURE_ARRAYS, MODEL_ARRAYS, STRUCTURE_ARRAYS, parse_codec, sample_parts
 from lodprt.store.reader import brief, damage, folder_bytes, missing_attributes, missing_parts, read_array
-from lodprt.store.writer import ALL_CHUNKS, FORMAT_NAME, TRANSFER_FORMAT, store_format
+from lodprt.store.writer import (ALL_CHUNKS, FORMAT_NAME, NEIGHBOURHOOD_FORMAT, TRANSFER_FORMAT, VOLUME_FORMAT,
+                                 store_format)
 
 log = logging.getLogger(__name__)
 
@@ -26,6 +27,10 @@ LIGHTS_ATTRS = ("grid", "box", "intensity", "falloff", "radius")
 HIERARCHY_ATTRS = ("roots", "depth", "seconds")
 #: versions ``Store`` reads: 1 (float32 samples) and 2 (samples encoded by a codec, ``lodprt.store.codecs``)
 READ_VERSIONS = (1, 2)
+#: the other stores lodprt writes, and what reads them (the point-light commands do not)
+OTHER_STORES = {VOLUME_FORMAT: "a volume store (bake-volume): render it with render-volume",
+                NEIGHBOURHOOD_FORMAT: "a neighbourhood store (bake-neighbourhood): render it with "
+                                      "render-environment --receiver"}
 
 
 def sample_group(k: int) -> str:
@@ -50,6 +55,8 @@ class Store:
         if fmt == TRANSFER_FORMAT:
             raise StoreError(f"{self.path}: a transfer store (bake --environment): relight it with render-environment "
                              f"or render --environment, not with the point-light commands")
+        if fmt in OTHER_STORES:
+            raise StoreError(f"{self.path}: {OTHER_STORES[fmt]}, not with the point-light commands")
         if not is_store(self.path):
             raise StoreError(f"{self.path}: not a lodprt store (zarr.json missing or without attribute format='lodprt')")
         self.root = zarr.open_group(str(self.path), mode="r")
@@ -445,3 +452,12 @@ def radiance_toward(positions, normals, coeffs, eye, intensity) -> np.ndarray:
 def open_store(path: str | os.PathLike) -> Store:
     """Open a bake store for reading; raises StoreError naming the path when it is not one."""
     return Store(path)
+
+
+def as_store(store) -> Store:
+    """``store`` (a ``Store``, or anything read as one), a path opened (``open_store``); else a LodprtError."""
+    if isinstance(store, (str, os.PathLike)):
+        return Store(store)
+    if not hasattr(store, "hierarchy"):
+        raise StoreError(f"{store!r:.60}: not a bake store; pass lodprt.open_store(path) or the path")
+    return store
