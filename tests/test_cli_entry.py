@@ -256,3 +256,23 @@ def test_drawn_output_that_is_a_folder_is_refused(ball_store, tmp_path, capsys, 
     rc, _, err = cli([command, ball_store[0], "--light", *light, *EYE, "-o", folder, "--overwrite"], capsys)
     assert rc == 2 and err.count("\n") == 1 and f"{folder}: is a folder; the output must be a file" in err, err
     assert (folder / "keep").is_dir()
+
+
+def test_bake_refuses_light_cut_options_without_the_hierarchy(tmp_path, capsys):
+    """`bake --no-hierarchy --threshold-deg 30` and `--no-hierarchy --hierarchy rounds` (and `--full
+    --threshold-deg 30`) were accepted and ignored (exit 0): refused in one line naming both options, as
+    `--threshold-deg -1` is, before the scene is read; the options at their defaults, not given, still pass."""
+    from lodprt.cli.main import main
+
+    out = tmp_path / "x.zarr"
+    for opts, msg in ((["--no-hierarchy", "--threshold-deg", "30"],
+                       "error: --threshold-deg 30 and --no-hierarchy: the light cut needs the hierarchy"),
+                      (["--full", "--threshold-deg", "30"], "error: --threshold-deg 30 and --full: the light cut"),
+                      (["--no-hierarchy", "--hierarchy", "rounds"],
+                       "error: --hierarchy rounds and --no-hierarchy: --no-hierarchy builds no hierarchy"),
+                      (["--threshold-deg", "-1"], "error: --threshold-deg -1.0: the light cut needs the hierarchy")):
+        assert main(["bake", str(tmp_path / "missing.toml"), "-o", str(out), *opts]) == 2, opts
+        err = capsys.readouterr().err
+        assert msg in err and "missing.toml" not in err, (opts, err)
+    assert main(["bake", str(tmp_path / "missing.toml"), "-o", str(out), "--no-hierarchy", "--full"]) == 2
+    assert "missing.toml" in capsys.readouterr().err  # no option refused: the scene is read (and missing)

@@ -194,3 +194,23 @@ def test_a_figure_of_panels_a_few_pixels_tall(cut_store, tmp_path):
         cam = Camera(eye=(0.05, 0.3, 0.45), target=(0.0, 0.1, 0.0), width=w, height=h)
         compare_figure(store, tmp_path / f"{w}x{h}.png", lights=[(0.05, 0.3, 0.1)], camera=cam)
         assert (tmp_path / f"{w}x{h}.png").stat().st_size > 0
+
+
+def test_readme_compare_row_is_true_to_its_parser():
+    """README's table said `lodprt compare OUT.zarr (as render, without --full)`, but compare requires --light and
+    --eye and has no --sample: every option of the row's synopsis is one of compare's, and the required ones stand
+    outside brackets."""
+    import re
+    from pathlib import Path
+
+    from lodprt.cli.main import build_parser
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    (row,) = [line for line in readme.splitlines() if line.startswith("| `lodprt compare ")]
+    synopsis = row.split("`")[1]
+    compare = build_parser()._subparsers._group_actions[0].choices["compare"]
+    options = {s for a in compare._actions for s in a.option_strings}
+    assert set(re.findall(r"--[a-z-]+", synopsis)) <= options, synopsis
+    required = {a.option_strings[-1] for a in compare._actions if a.required and a.option_strings}
+    outside = re.sub(r"\[[^\]]*\]", "", synopsis)
+    assert {"--light", "--eye", "--out"} == required and {"--light", "--eye", "-o"} <= set(outside.split()), synopsis

@@ -511,3 +511,11 @@ def test_khronos_validator_reports_nothing(stores, tmp_path, capsys, name, full)
     issues = json.loads(res.stdout)
     counts = {k: issues[k] for k in ("numErrors", "numWarnings", "numInfos", "numHints")}
     assert counts == {"numErrors": 0, "numWarnings": 0, "numInfos": 0, "numHints": 0}, issues["messages"]
+
+
+def test_export_docs_say_radiance_is_the_sh_reconstruction():
+    """docs/EXPORT.md described _RADIANCE as "L itself", yet export writes negative values there (SH ringing): the
+    row says it is the SH reconstruction, which can ring below 0, while COLOR_0 is clipped."""
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "EXPORT.md").read_text()
+    (row,) = [line for line in docs.splitlines() if line.startswith("| `_RADIANCE`")]
+    assert "SH reconstruction" in row and "below 0" in row and "`COLOR_0` is clipped" in row, row

@@ -281,3 +281,36 @@ def test_commands_read_gi_stores(tmp_path, gl, capsys):
 
     img = iio.imread(tmp_path / "r.png")
     assert img.shape[:2] == (64, 96) and img.max() > 0
+
+
+def test_cli_refuses_interreflection_options_it_would_drop_and_names_bad_values(tmp_path, capsys):
+    """`bake --gi-rays 4` (or --indirect-tolerance, --indirect-threshold-deg, --bounce-threshold) without --bounces,
+    and the indirect cut's options with --full or --no-hierarchy, were accepted and ignored (exit 0); a bad value
+    was named as the library's field (gi_rays 0, bounces -1, bounce_threshold -1.0, indirect_tolerance 0.0 ... or
+    None). Each is refused in one line naming the options, before the scene is read (exit 2); the defaults pass."""
+    from lodprt.cli.main import main
+
+    out = tmp_path / "g.zarr"
+    cases = (
+        (["--gi-rays", "4"], "error: --gi-rays without --bounces: with no --bounces B >= 1 the bake is direct light"),
+        (["--indirect-tolerance", "0.05"], "error: --indirect-tolerance without --bounces"),
+        (["--indirect-threshold-deg", "3"], "error: --indirect-threshold-deg without --bounces"),
+        (["--bounce-threshold", "0.1", "--gi-rays", "64"], "error: --bounce-threshold, --gi-rays without --bounces"),
+        (["--bounces", "1", "--full", "--indirect-tolerance", "0.05"],
+         "error: --indirect-tolerance and --full: the indirect cut is a light cut's"),
+        (["--bounces", "1", "--no-hierarchy", "--indirect-threshold-deg", "3"],
+         "error: --indirect-threshold-deg and --no-hierarchy: the indirect cut is a light cut's"),
+        (["--bounces", "1", "--indirect-threshold-deg", "3", "--indirect-tolerance", "0.05"],
+         "error: --indirect-threshold-deg and --indirect-tolerance: the tolerance chooses where to gather instead"),
+        (["--environment", "sky:8", "--gi-rays", "4"], "error: --gi-rays: point-light bake option; an environment"),
+        (["--bounces", "1", "--gi-rays", "0"], "error: --gi-rays 0: must be an integer in 1..65536"),
+        (["--bounces", "-1"], "error: --bounces -1: must be an integer in 0..64"),
+        (["--bounces", "1", "--bounce-threshold", "-1"], "error: --bounce-threshold -1.0: must be finite and >= 0"),
+        (["--bounces", "1", "--indirect-tolerance", "0"], "error: --indirect-tolerance 0: must lie in (0, 1] (a "
+                                                          "relative RMS error of the indirect radiance, G-9)\n"),
+    )
+    for opts, msg in cases:
+        assert main(["bake", str(tmp_path / "missing.toml"), "-o", str(out), "--device", "cpu", *opts]) == 2, opts
+        err = capsys.readouterr().err
+        assert msg in err and "missing.toml" not in err, (opts, err)
+    assert not out.exists()

@@ -621,3 +621,25 @@ def test_cli_exr_outputs_read_back_with_openexr(cut_store, tmp_path, capsys, mon
     assert main(["render", str(cut_store), *VIEW, "-o", str(tmp_path / "g.exr")]) == 2
     err = capsys.readouterr().err
     assert "pip install 'lodprt[exr]'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_render_refuses_view_cut_options_with_full_before_the_store(tmp_path, capsys):
+    """`render --full --error-bound 0.1` (and turntable, export: the view cut's options, which --full leaves unread)
+    drew with them ignored; `render --target-psnr 0` said "target_psnr 0.0" after the store was opened. Both are
+    refused naming the options before the store is read (it does not exist here); `compare` has no --full."""
+    from lodprt.cli.main import main
+
+    missing = str(tmp_path / "none.zarr")
+    view = ["--light", "0", "1", "0", "--eye", "0", "0.3", "1"]
+    for command, out, opts, msg in (
+            ("render", "f.png", ["--full", "--error-bound", "0.1"], "error: --error-bound and --full: --full draws"),
+            ("render", "f.png", ["--full", "--criterion", "thesis", "--alpha", "0.2"], "error: --criterion, --alpha and "
+                                                                                       "--full: --full draws"),
+            ("turntable", "t.gif", ["--full", "--target-psnr", "30"], "error: --target-psnr and --full"),
+            ("export", "e.glb", ["--full", "--error-bound", "0.1"], "error: --error-bound and --full"),
+            ("render", "f.png", ["--target-psnr", "0"], "error: --target-psnr 0.0: must be a PSNR in dB in (0, 200]"),
+            ("compare", "c.png", ["--error-bound", "-2"], "error: --error-bound -2.0: must be a finite number >= 0")):
+        assert main([command, missing, *view, *opts, "-o", str(tmp_path / out)]) == 2, (command, opts)
+        err = capsys.readouterr().err
+        assert msg in err and "none.zarr" not in err, (command, opts, err)
+    assert not [p for p in tmp_path.iterdir()]

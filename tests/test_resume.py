@@ -281,3 +281,26 @@ def test_resume_with_compress_encodes_a_finished_float32_store(tmp_path):
     with pytest.raises(LodprtError, match="is encoded with codec q8; --add-samples extends a float32 store"):
         api_bake(scene_file(tmp_path, grid=(6, 1, 1), name="more.toml"), out, add_samples=True)
     assert files(out) == before
+
+
+def test_resume_without_compress_leaves_a_finished_encoded_store(tmp_path, caplog, capsys):
+    """`bake --compress q8` then `bake --resume` (no --compress) said 'nothing to do' and then failed with exit 2
+    'holds this bake encoded with codec q8, not none'. A finished store is left as it is, exit 0, its codec named;
+    another codec asked is refused with the codec error alone, before any 'nothing to do'."""
+    from lodprt.cli.main import main
+
+    toml = scene_file(tmp_path, grid=(2, 1, 1))
+    out = tmp_path / "g.zarr"
+    assert main(["bake", str(toml), "-o", str(out), *FAST, "--compress", "q8"]) == 0
+    before = files(out)
+    caplog.clear()
+    capsys.readouterr()
+    assert main(["bake", str(toml), "-o", str(out), *FAST, "--resume"]) == 0
+    assert "already holds every light sample of this bake (encoded with codec q8, left as it is); nothing to do" \
+        in caplog.text
+    assert files(out) == before and open_store(out).codec == "q8"
+    caplog.clear()
+    capsys.readouterr()
+    assert main(["bake", str(toml), "-o", str(out), *FAST, "--resume", "--compress", "q10"]) == 2
+    assert "holds this bake encoded with codec q8, not q10" in capsys.readouterr().err
+    assert "nothing to do" not in caplog.text and files(out) == before

@@ -551,6 +551,51 @@ def test_cli_frames_json(bunny_bake, capsys):
     assert main(["frames", str(bunny_bake), "--frames", "0"]) == 2
 
 
+def test_cli_frames_one_frame_has_no_time_after_the_first(bunny_bake, capsys):
+    """`frames --frames 1` printed "median 247.88 ms per frame after the first (248 ms)" and --json gave median_ms and
+    p95_ms equal to the first frame: with no frame after the first they are null and the text says so."""
+    import json
+
+    from lodprt.cli.main import main
+
+    assert main(["frames", str(bunny_bake), "--frames", "1", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)["summary"]
+    assert summary["first_frame_ms"] > 0
+    assert (summary["median_ms"], summary["mean_ms"], summary["p95_ms"]) == (None, None, None)
+    assert main(["frames", str(bunny_bake), "--frames", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "no frame after it to time" in text and "after the first" not in text, text
+
+
+def test_cli_frames_refuses_options_full_drops_and_names_bad_values_first(tmp_path, capsys):
+    """`frames --full --triangle-budget 10` (or --error-bound, --target-psnr, --criterion, --alpha, --frame-ms: the
+    view cut's, which --full leaves unread) ran with them ignored; `--triangle-budget 0` said "triangle_budget 0"
+    after the store was opened; `--target-psnr abc` said "invalid target_arg value". Each is refused naming the
+    options, before the store is read (the store here does not exist)."""
+    from lodprt.cli.main import main
+
+    missing = str(tmp_path / "none.zarr")
+    for opts, msg in ((["--full", "--triangle-budget", "10"], "error: --triangle-budget and --full: --full draws the "
+                                                               "full mesh, with no view cut for it to choose or steer"),
+                      (["--full", "--error-bound", "0.1"], "error: --error-bound and --full"),
+                      (["--full", "--criterion", "screen", "--target-psnr", "30", "--alpha", "0.5", "--frame-ms", "9"],
+                       "error: --criterion, --target-psnr, --alpha, --frame-ms and --full: "),
+                      (["--triangle-budget", "0"], "error: --triangle-budget 0: must be a whole number of triangles"),
+                      (["--target-psnr", "0"], "error: --target-psnr 0.0: must be a PSNR in dB in (0, 200], or 'off'"),
+                      (["--error-bound", "-1"], "error: --error-bound -1.0: must be a finite number >= 0"),
+                      (["--criterion", "thesis", "--target-psnr", "30"],
+                       "error: --target-psnr 30.0: a setting of criterion 'screen', not with criterion 'thesis'"),
+                      (["--target-psnr", "abc"],
+                       "error: argument --target-psnr: 'abc': must be a PSNR in dB in (0, 200], or 'off'")):
+        try:
+            code = main(["frames", missing, *opts])
+        except SystemExit as stop:  # argparse's own refusal
+            code = stop.code
+        err = capsys.readouterr().err
+        assert code == 2 and msg in err and "none.zarr" not in err, (opts, err)
+        assert "triangle_budget" not in err and "target_psnr" not in err and "target_arg" not in err, err
+
+
 def test_cli_frames_reports_the_samples_its_lights_complete(bunny_bake, capsys):
     """`lodprt frames` reports, apart from the frame times, the light samples each frame's lights completed: with a
     cache that holds every sample, each sample the path's lights reach is completed once (counted by a second

@@ -338,6 +338,17 @@ def test_cli_bake_and_render_environment(tmp_path, capsys, gl):
                  "--frames", "2", "-o", str(png)])
     assert code == 0 and (tmp_path / "relit_0000.png").is_file() and (tmp_path / "relit_0001.png").is_file()
     assert main(["render-environment", str(tmp_path / "nope.zarr"), "--eye", "0", "1", "4", "-o", str(png)]) == 2
+    # --overwrite with fewer frames removes the earlier run's extra ones (they were left, as turntable's once were)
+    (tmp_path / "relit_00002.png").write_bytes(b"not a name the command writes")
+    capsys.readouterr()
+    small = [str(out), "--eye", "0", "1", "4", "--size", "16", "12", "-o", str(png), "--overwrite"]
+    assert main(["render-environment", *small, "--frames", "1"]) == 0
+    assert "(removed 2 stale frames of an earlier run)" in capsys.readouterr().out
+    assert png.is_file() and sorted(p.name for p in tmp_path.glob("relit_*")) == ["relit_00002.png"]
+    assert main(["render-environment", *small, "--frames", "3"]) == 0 and "stale" not in capsys.readouterr().out
+    assert main(["render-environment", *small, "--frames", "2"]) == 0
+    assert "(removed 1 stale frame of an earlier run)" in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.glob("relit_*")) == ["relit_0000.png", "relit_00002.png", "relit_0001.png"]
 
 
 def test_cli_short_forms_bake_and_render_with_environment(tmp_path, capsys, gl):

@@ -534,6 +534,11 @@ def test_path_summary_is_the_records_median_and_sums():
     player = PathPlayer.__new__(PathPlayer)  # the records alone: no run time needed
     player.path, player.played = "dolly", []
     assert summary_line(player.summary()) == "path dolly: no frame played"
+    player.record(900.0, 1500.0, 20.0, 3)  # one frame: no median after it (the first frame's was given as one)
+    one = player.summary()
+    assert one["median_ms_update"] is None and one["median_ms_draw"] is None
+    assert summary_line(one).startswith("path dolly: 1 frame, first frame 1500 ms, no frame after it to time; ")
+    player.played = []
     for rec in [(900.0, 1500.0, 20.0, 3), (0.0, 10.0, 4.0, 0), (2500.0, 30.0, 8.0, 2), (0.0, 20.0, 6.0, 0)]:
         player.record(*rec)
     s = player.summary()

@@ -293,3 +293,29 @@ def test_volume_inputs_and_picture_options_are_checked(tmp_path, capsys):
         except SystemExit as stop:  # argparse's own refusal
             code = stop.code
         assert code == 2 and msg in capsys.readouterr().err, opts
+
+
+def test_bake_volume_refuses_a_step_of_endless_marching_and_bad_bounds(tmp_path, capsys):
+    """bake-volume --step 1e-9 marched ~2e9 steps a ray without end: a step giving more than 2^20 steps across the
+    box's diagonal is refused naming --step and the smallest step allowed, before any work; --bounds with max under
+    min said 'bounds: bounds:' (the prefix twice), and now names --bounds."""
+    from lodprt.precompute.volume import MAX_MARCH_STEPS, check_step
+
+    out = tmp_path / "v.zarr"
+    for opts, msg in ((["--step", "1e-9"], "--step 1e-09: 3e+09 march steps across the box's diagonal (3), more "
+                                           "than 1,048,576 (2^20); give --step >= 2.86e-06"),
+                      (["--step", "0"], "--step 0: must be a positive number"),
+                      (["--bounds", "1", "1", "1", "0", "0", "0"], "error: --bounds: max must exceed min")):
+        assert main(["bake-volume", "cloud:8", "--rays", "1", "--sh-order", "1", "-o", str(out), *opts]) == 2, opts
+        err = capsys.readouterr().err
+        assert msg in err and "bounds: bounds" not in err, err
+    assert not out.exists()
+    vol = procedural_volume("cloud:8")
+    diagonal = float(np.linalg.norm(vol.hi - vol.lo))
+    assert check_step(vol, diagonal / MAX_MARCH_STEPS * 1.001) == pytest.approx(diagonal / MAX_MARCH_STEPS * 1.001)
+    with pytest.raises(LodprtError, match=r"^volume step 1e-09: .* more than 1,048,576"):
+        VolumeGrid(vol, device="cpu", step=1e-9)
+    with pytest.raises(LodprtError, match=r"g.npy: bounds: max must exceed min") as caught:
+        np.save(tmp_path / "g.npy", np.ones((2, 2, 2), np.float32))
+        load_volume(tmp_path / "g.npy", bounds=(1, 1, 1, 0, 0, 0))
+    assert "bounds: bounds" not in str(caught.value)

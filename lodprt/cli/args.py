@@ -28,6 +28,41 @@ def finite(text: str) -> float:
     return value
 
 
+class Given(argparse.Action):
+    """``store``, noting the option's dest in ``namespace.given``: ``given(args, dest)`` tells an option given
+    explicitly from its default (an option dropped unread is refused only when given)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        namespace.given = {*getattr(namespace, "given", ()), self.dest}
+
+
+def given(args, dest: str) -> bool:
+    """Whether the option of ``dest`` (added with ``action=Given``) was given on the command line."""
+    return dest in getattr(args, "given", ())
+
+
+def knob_type(knob, cls):
+    """argparse type of a view-cut knob (``Knob``, of criterion class ``cls``): ``knob.parse``; a text it cannot
+    read is refused with what the library's check says it must be ('abc' said: invalid target_arg value)."""
+
+    def parse(text: str):
+        try:
+            return knob.parse(text)
+        except ValueError:
+            must = "must be a number"
+            try:
+                cls(**{knob.name: text})  # the library's check of a value that is no number
+            except LodprtError as exc:
+                must = str(exc).partition(": ")[2] or must
+            except Exception:  # noqa: BLE001 - any other failure: the plain words above
+                pass
+            raise argparse.ArgumentTypeError(f"{text!r}: {must}") from None
+
+    parse.__name__ = knob.name
+    return parse
+
+
 def add_store(p: argparse.ArgumentParser) -> None:
     """The store a command reads (positional)."""
     p.add_argument("store", metavar="OUT.zarr")
@@ -65,7 +100,7 @@ def add_hierarchy_method(p: argparse.ArgumentParser) -> None:
     """``--hierarchy sequential|rounds|pymeshlab``: the vertex hierarchy's build (``build_hierarchy(method=...)``)."""
     from lodprt.model.hierarchy_build import METHODS
 
-    p.add_argument("--hierarchy", default=METHODS[0], metavar="METHOD",
+    p.add_argument("--hierarchy", default=METHODS[0], metavar="METHOD", action=Given,
                    help=f"vertex hierarchy build: {', '.join(METHODS)} (default {METHODS[0]}: QEM half-edge "
                    "collapses one at a time in Warp kernels, one thread per mesh unit; rounds: rounds of parallel QEM "
                    "collapses; pymeshlab: the same rounds replaying pymeshlab's QEM halvings; docs/HIERARCHY.md)")
@@ -112,20 +147,22 @@ def add_view_cut(p: argparse.ArgumentParser) -> None:
     from lodprt.runtime.criteria import CRITERIA
 
     names = tuple(CRITERIA)
-    p.add_argument("--criterion", choices=names, default=names[0],
+    p.add_argument("--criterion", choices=names, default=names[0], action=Given,
                    help="view-cut criterion: " + ", ".join(c.SUMMARY for c in CRITERIA.values()))
     knobs: dict = {}
+    owner: dict = {}
     for cls in CRITERIA.values():
         for knob in cls.KNOBS:
             knobs.setdefault(knob.name, []).append(knob)
+            owner.setdefault(knob.name, cls)
     for name, same in knobs.items():
         defaults = {k.default for k in same}
         default = defaults.pop() if len(defaults) == 1 else None  # None: each criterion's own
         own = "" if default is None or len(same) > 1 else f" (default {default:g})"
         what = "view cut error bound (default " if name == "error_bound" else ""
         text = what + "; ".join(k.help for k in same) + (")" if what else "") + own
-        p.add_argument("--" + name.replace("_", "-"), type=same[0].parse, default=default, metavar=same[0].metavar,
-                       help=text)
+        p.add_argument("--" + name.replace("_", "-"), type=knob_type(same[0], owner[name]), default=default,
+                       metavar=same[0].metavar, help=text, action=Given)
     add_interpolation(p)
     add_outside(p)
 
@@ -138,9 +175,28 @@ def criterion(args):
     return criterion_of(args)
 
 
+def view_cut_given(args) -> list[str]:
+    """The view-cut options given explicitly (``add_view_cut``'s criterion and knobs, ``--frame-ms``,
+    ``--triangle-budget``), as flags: what LOD off (``--full``) leaves unread."""
+    from lodprt.runtime.criteria import CRITERIA
+
+    dests = ["criterion", *dict.fromkeys(k.name for c in CRITERIA.values() for k in c.KNOBS), "frame_ms",
+             "triangle_budget"]
+    return ["--" + d.replace("_", "-") for d in dests if given(args, d)]
+
+
+def refuse_with_full(args) -> None:
+    """Refuse view-cut options given with ``--full`` (they were dropped without a word): the full mesh has no view
+    cut for them to choose or steer."""
+    unread = view_cut_given(args) if getattr(args, "full", False) else []
+    if unread:
+        raise LodprtError(f"{', '.join(unread)} and --full: --full draws the full mesh, with no view cut for "
+                          f"{'them' if len(unread) > 1 else 'it'} to choose or steer")
+
+
 def add_frame_ms(p: argparse.ArgumentParser) -> None:
     """``--frame-ms``: the run time's frame-time budget (B-2, ``lodprt.runtime.budgets``)."""
-    p.add_argument("--frame-ms", type=float, default=None, metavar="MS",
+    p.add_argument("--frame-ms", type=float, default=None, metavar="MS", action=Given,
                    help="frame-time budget in milliseconds: while the frames in motion take longer, the view cut's "
                         "bound gets a floor that rises (x1.25 a frame) until they fit, and falls again under 80%% of "
                         "it (B-2); frames that estimate their error are not counted (default: none)")

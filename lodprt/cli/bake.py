@@ -42,7 +42,7 @@ def register(sub) -> None:
                    help="bake distant-light transfer instead (as bake-environment with its defaults, which lists the "
                    "transfer options): ENV is stored as the default lighting; 'none' stores none")
     cli_args.add_device(b)
-    b.add_argument("--threshold-deg", type=float, default=5.0, metavar="E",
+    b.add_argument("--threshold-deg", type=float, default=5.0, action=cli_args.Given, metavar="E",
                    help="light cut: collapse lit siblings whose incident angles differ by less than E degrees (default 5)")
     b.add_argument("--full", action="store_true", help="keep every vertex (no light cut)")
     cli_args.add_jobs(b, "one light sample each")
@@ -67,16 +67,16 @@ def register(sub) -> None:
     gi = b.add_argument_group("interreflection (docs/GI.md)")
     gi.add_argument("--bounces", type=int, default=0, metavar="B",
                     help="diffuse interreflection passes after the direct light (default 0: direct light only)")
-    gi.add_argument("--bounce-threshold", type=float, default=1e-3, metavar="T",
+    gi.add_argument("--bounce-threshold", type=float, default=1e-3, action=cli_args.Given, metavar="T",
                     help="stop the passes early once one carries less than T times the direct light's power "
                     "(default 1e-3)")
-    gi.add_argument("--gi-rays", type=int, default=64, metavar="R",
+    gi.add_argument("--gi-rays", type=int, default=64, action=cli_args.Given, metavar="R",
                     help="gathering rays per vertex and pass, cosine-weighted (default 64)")
-    gi.add_argument("--indirect-threshold-deg", type=float, default=10.0, metavar="E",
+    gi.add_argument("--indirect-threshold-deg", type=float, default=10.0, action=cli_args.Given, metavar="E",
                     help="light cut: gather indirect light only on the indirect cut, whose nodes' bounding spheres "
                     "and normal cones span at most E degrees seen from the nearest surface (default 10); the other "
                     "vertices are completed (T-15)")
-    gi.add_argument("--indirect-tolerance", type=float, default=None, metavar="TAU",
+    gi.add_argument("--indirect-tolerance", type=float, default=None, action=cli_args.Given, metavar="TAU",
                     help="light cut: choose where to gather per sample and pass by the indirect light itself "
                     "instead of --indirect-threshold-deg (G-9): refine from a coarse level of the hierarchy where "
                     "the gathered irradiance departs from its completion (T-15), within a budget: each pass' "
@@ -98,6 +98,7 @@ def cmd_bake(args) -> int:
     from lodprt.model.scene import load_scene
     from lodprt.precompute.bake import bake
 
+    _refuse_unread(args)
     cli_args.at_least("--jobs", args.jobs, 1)
     cli_args.at_least("--workers", args.workers, 1)
     cli_args.at_least("--vertex-range", args.vertex_range, 1)
@@ -117,6 +118,14 @@ def cmd_bake(args) -> int:
     check_hierarchy(not args.no_hierarchy, light_cut_threshold(args.threshold_deg, full=full,
                                                                  hierarchy=not args.no_hierarchy),
                     args.hierarchy, name="--threshold-deg")
+    from lodprt.precompute.gi import GISettings
+
+    tol = args.indirect_tolerance
+    if tol is not None and not 0 < tol <= 1:  # the library's words name None, no option
+        raise LodprtError(f"--indirect-tolerance {tol:g}: must lie in (0, 1] (a relative RMS error of the indirect "
+                          "radiance, G-9)")
+    GISettings(args.bounces, args.bounce_threshold, args.gi_rays, args.indirect_threshold_deg,  # and bad GI values
+               indirect_tolerance=args.indirect_tolerance)
     device = resolve_device(args.device)  # refuse an unavailable device before loading anything
     scene = load_scene(args.scene)
     n = scene.lights.positions.shape[0]
@@ -154,6 +163,44 @@ def cmd_bake(args) -> int:
     return 0
 
 
+#: the interreflection options (a light cut's indirect cut: the last two), which only --bounces reads
+GI_OPTIONS = ("bounce_threshold", "gi_rays", "indirect_threshold_deg", "indirect_tolerance")
+
+
+def _flags(args, dests) -> list[str]:
+    """The options of ``dests`` given explicitly (``cli_args.Given``), as flags."""
+    return ["--" + d.replace("_", "-") for d in dests if cli_args.given(args, d)]
+
+
+def _refuse_unread(args) -> None:
+    """Refuse options given explicitly that this bake would drop unread (they were ignored without a word)."""
+    if args.environment is not None:
+        return  # _bake_environment refuses the point-light options
+    if not args.bounces:
+        unread = _flags(args, GI_OPTIONS)
+        if unread:
+            raise LodprtError(f"{', '.join(unread)} without --bounces: with no --bounces B >= 1 the bake is direct "
+                              "light only, which reads no interreflection option")
+    if cli_args.given(args, "indirect_threshold_deg") and args.indirect_tolerance is not None:
+        raise LodprtError("--indirect-threshold-deg and --indirect-tolerance: the tolerance chooses where to gather "
+                          "instead of the angle (G-9); give one")
+    full = "--no-hierarchy" if args.no_hierarchy else "--full" if args.full else None
+    if full is None:
+        return
+    if args.no_hierarchy:
+        unread = _flags(args, ("hierarchy",))
+        if unread:
+            raise LodprtError(f"--hierarchy {args.hierarchy} and --no-hierarchy: --no-hierarchy builds no hierarchy")
+    unread = _flags(args, ("threshold_deg",))
+    if unread:
+        raise LodprtError(f"--threshold-deg {args.threshold_deg:g} and {full}: the light cut needs the hierarchy; "
+                          f"{full} bakes every vertex (no light cut)")
+    unread = _flags(args, GI_OPTIONS[2:]) if args.bounces else []
+    if unread:
+        raise LodprtError(f"{', '.join(unread)} and {full}: the indirect cut is a light cut's; {full} gathers at "
+                          "every vertex (no light cut)")
+
+
 def _bake_environment(args) -> int:
     """``bake SCENE --environment ENV``: distant-light transfer, as bake-environment with its defaults."""
     if (args.resume or args.add_samples or args.workers is not None or args.scheduler is not None
@@ -167,12 +214,16 @@ def _bake_environment(args) -> int:
         raise LodprtError("--compress is a point-light option; the transfer store of --environment has no codec")
     from lodprt.model.hierarchy_build import METHODS
 
-    if args.hierarchy != METHODS[0]:
+    if cli_args.given(args, "hierarchy"):
         raise LodprtError("--hierarchy is a point-light option; an environment bake builds its hierarchy with "
                           f"bake-environment --lod-threshold ({METHODS[0]})")
     if args.full or args.no_hierarchy:
         raise LodprtError("--full and --no-hierarchy are point-light options; an environment bake has no light "
                           "cut (see bake-environment --lod-threshold)")
+    unread = _flags(args, ("threshold_deg", *GI_OPTIONS))
+    if unread:
+        raise LodprtError(f"{', '.join(unread)}: point-light bake option{'s' * (len(unread) > 1)}; an environment "
+                          "bake takes its own from bake-environment (--lod-threshold, --rays, --bounce-threshold)")
     options = {} if args.sh_order is None else {"sh_order": args.sh_order}
     return environment_cli.bake_environment(
         args.scene, args.out, environment=None if args.environment == "none" else args.environment,

@@ -177,6 +177,8 @@ def cmd_render(args) -> int:
     from lodprt.display.pictures import render_to_file
     from lodprt.store.bake_store import open_store
 
+    cli_args.refuse_with_full(args)
+    cli_args.criterion(args)  # its values checked before the store is opened
     store = open_store(args.store)
     if args.sample is not None:
         _sample_as_light(args, store)
@@ -227,12 +229,13 @@ def cmd_compare(args) -> int:
     from lodprt.display.compare import compare_figure
     from lodprt.store.bake_store import open_store
 
+    view_cut = _view_cut(args)  # its values checked before the store is opened
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     opts = _draw_options(args)
     opts.pop("light_markers")
     numbers = compare_figure(store, args.out, lights=lights, colors=colors, camera=camera, overwrite=args.overwrite,
-                             scale=args.scale, markers=not args.no_markers, **_view_cut(args), **opts)
+                             scale=args.scale, markers=not args.no_markers, **view_cut, **opts)
     print(f"wrote {args.out}: {numbers['triangles_lod']:,} of {numbers['triangles_full']:,} triangles, PSNR "
           f"{numbers['psnr_db']:.1f} dB, relative RMSE {numbers['relative_rmse']:.4f}")
     return 0
@@ -243,11 +246,13 @@ def cmd_turntable(args) -> int:
     from lodprt.store.bake_store import open_store
 
     check_fps(args.fps, os.path.splitext(str(args.out or ""))[1])  # a bad --fps fails before the store is opened
+    cli_args.refuse_with_full(args)
+    view_cut = _view_cut(args)  # and so do bad view-cut values
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     written, stale = turntable(store, args.out, lights=lights, colors=colors, camera=camera, frames=args.frames,
                                light_turns=args.light_turns, fps=args.fps, lod=not args.full,
-                               overwrite=args.overwrite, **_view_cut(args), **_draw_options(args))
+                               overwrite=args.overwrite, **view_cut, **_draw_options(args))
     # --overwrite over a longer sequence: say how many of its numbered frames were removed
     removed = f" (removed {stale} stale frame{'s' * (stale != 1)} of an earlier run)" if stale else ""
     print(f"wrote {written}{removed}")
@@ -266,6 +271,7 @@ def cmd_view(args) -> int:
         from lodprt.display.pictures import check_output
 
         check_output(args.screenshot, (".png",), overwrite=True)
+    view_cut = _view_cut(args)  # its values checked before the store is opened
     store = open_store(args.store)
     lights, colors, camera = _view_setup(args, store)
     return run_viewer(store, lights=lights, colors=colors, camera=camera, lod=not args.full, frames=args.frames,
@@ -273,4 +279,4 @@ def cmd_view(args) -> int:
                       set_lights=set_lights_with_progress, path=args.path, path_frames=args.frames,
                       fixed_lights=bool(args.light), progress=transient_bar("opening: completing light samples",
                                                                             "sample"),
-                      **_view_cut(args), **_draw_options(args))
+                      **view_cut, **_draw_options(args))

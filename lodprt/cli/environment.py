@@ -106,7 +106,8 @@ def _add_render_environment(sub) -> None:
     re.add_argument("--environment", default=None, metavar="ENV", help="lighting (default: the one stored by the bake); " + ENV_HELP)
     re.add_argument("--rotate", type=cli_args.finite, default=0.0, metavar="DEG", help="turn the environment about +y by DEG degrees")
     re.add_argument("--frames", type=int, default=1, metavar="N",
-                    help="N > 1: N images turning the environment by 360/N degrees each, OUT_0000.png ... (default 1)")
+                    help="N > 1: N images turning the environment by 360/N degrees each, OUT_0000.png ... (default "
+                    "1); with --overwrite, the numbered frames of an earlier, longer run of OUT are removed")
     cli_args.add_camera(re)
     re.add_argument("--white", type=cli_args.finite, default=None, metavar="L", help="radiance shown as white (default: 99th percentile of the first frame)")
     _add_window(re, "the lighting (chosen once: a band window commutes with --rotate)")
@@ -249,7 +250,13 @@ def render_environment(store_path, out, *, eye, environment: str | None = None, 
             pos = rad[rad > 0]
             white = float(np.percentile(pos, 99)) if pos.size else 1.0
         save_png(p, img)
+    stale = 0
+    if overwrite:  # the numbered frames of an earlier, longer run past these (all of them under one picture)
+        from lodprt.display.pictures import remove_stale_frames
+
+        stale = remove_stale_frames(out.parent, f"{out.stem}_", ".png", frames if frames > 1 else 0)
     print(f"wrote {paths[0]}" + (f" ... {paths[-1].name} ({len(paths)} frames)" if len(paths) > 1 else "")
           + f": environment turned {rotate:g} deg" + (f" + 360/{frames} per frame" if len(paths) > 1 else "")
-          + (f"; {choice.describe()}" if window != "none" else ""))
+          + (f"; {choice.describe()}" if window != "none" else "")
+          + (f" (removed {stale} stale frame{'s' * (stale != 1)} of an earlier run)" if stale else ""))
     return 0

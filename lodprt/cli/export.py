@@ -16,7 +16,8 @@ def register(sub) -> None:
         "normals, triangles, COLOR_0 = the radiance toward the eye (--vertex-colors display: tone-mapped as render "
         "shows it, before the sRGB curve a glTF viewer applies; linear: the radiance over its maximum), the custom attributes "
         "_SH_0.._SH_{n-1} (VEC3 float: the RGB SH coefficients of the outgoing radiance over the view direction, "
-        "intensities applied), _RADIANCE (linear radiance) and _VERTEX_ID (index in the store), and an unlit "
+        "intensities applied), _RADIANCE (linear radiance: their SH reconstruction, unclipped, which can ring below 0) "
+        "and _VERTEX_ID (index in the store), and an unlit "
         "material (docs/EXPORT.md).",
     )
     cli_args.add_store(ex)
@@ -31,7 +32,8 @@ def register(sub) -> None:
     ex.add_argument("--vertex-colors", choices=("display", "linear"), default="display",
                     help="COLOR_0 (glTF keeps it in [0, 1]): display = clip(2^exposure L / white, 0, 1) in linear "
                     "light, as render shows it (default); linear = L / max(L), proportional to the radiance L (the "
-                    "scale is in asset.extras.lodprt.color_scale); _RADIANCE always holds L itself")
+                    "scale is in asset.extras.lodprt.color_scale); _RADIANCE always holds L unclipped (the SH "
+                    "reconstruction: it can ring below 0)")
     ex.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="display colours: exposure in stops (default 0)")
     ex.add_argument("--white", type=float, default=None, metavar="L",
                     help="display colours: radiance shown as white (default: the run time's white point, as render)")
@@ -47,10 +49,12 @@ def cmd_export(args) -> int:
     cli_args.check_tone(args.white, args.exposure)
     if args.light is not None:
         cli_args.check_colors(args.color, args.light)
+    cli_args.refuse_with_full(args)
+    criterion = cli_args.criterion(args)
     store = open_store(args.store)
     stats = export_glb(store, args.out, sample=args.sample, lights=args.light, colors=args.color, eye=args.eye,
                        target=args.target, up=args.up, fov=args.fov, size=args.size, lod=not args.full,
-                       criterion=cli_args.criterion(args), interpolation=args.interpolation, outside=args.outside,
+                       criterion=criterion, interpolation=args.interpolation, outside=args.outside,
                        vertex_colors=args.vertex_colors, white=args.white, exposure=args.exposure,
                        overwrite=args.overwrite)
     mapping = (f"white {stats['white']:.4g}" if "white" in stats else f"scale {stats['color_scale']:.4g}")

@@ -32,7 +32,8 @@ def register(sub) -> None:
     fr.add_argument("--frames", type=int, default=PATH_FRAMES, metavar="N",
                     help=f"number of frames (default {PATH_FRAMES})")
     cli_args.add_view_cut(fr)
-    fr.add_argument("--triangle-budget", type=int, default=None, metavar="T", help="steer the bound toward this many triangles")
+    fr.add_argument("--triangle-budget", type=int, default=None, metavar="T", action=cli_args.Given,
+                    help="steer the bound toward this many triangles")
     cli_args.add_frame_ms(fr)
     cli_args.add_light(fr, help="fixed light position(s) instead of the moving light")
     cli_args.add_screen(fr, size_what="screen size for e_geo")
@@ -49,13 +50,19 @@ def register(sub) -> None:
 def cmd_frames(args) -> int:
     from lodprt.cli.progress import set_lights_with_progress
     from lodprt.runtime.camera import camera_path
+    from lodprt.runtime.settings import check_frame_ms, check_triangle_budget
     from lodprt.store.bake_store import open_store
 
     cli_args.at_least("--frames", args.frames, 1)
     cli_args.at_least("--error-every", args.error_every, 0, " (0: no image error)")
+    cli_args.refuse_with_full(args)
+    # the view cut's values before the store is opened (the names are the options': lodprt.cli.main.as_flags)
+    criterion = cli_args.criterion(args)
+    check_triangle_budget(args.triangle_budget)
+    check_frame_ms(args.frame_ms)
     t_open = time.perf_counter()
     store = open_store(args.store)
-    rt = _runtime(store, criterion=cli_args.criterion(args), triangle_budget=args.triangle_budget,
+    rt = _runtime(store, criterion=criterion, triangle_budget=args.triangle_budget,
                   frame_ms=args.frame_ms,
                   device=args.device, lod=not args.full, interpolation=args.interpolation, outside=args.outside)
     open_seconds = time.perf_counter() - t_open  # the store and its run time, the samples completed at open included
@@ -131,12 +138,13 @@ class _FrameErrors:
 def _frames_summary(args, rt, store, rows, at_open: int, open_seconds: float) -> dict:
     import numpy as np
 
-    ms = np.array([r["ms_total"] for r in rows[1:]] or [rows[0]["ms_total"]])
+    ms = np.array([r["ms_total"] for r in rows[1:]])  # the frames after the first: None when there is none
     tris = np.array([r["triangles"] for r in rows])
     summary = {"frames": len(rows), "path": args.path, "lod": not args.full, "criterion": rt.criterion.name,
                "interpolation": rt.interpolation, **rt.criterion.settings(),  # the active criterion's knobs only
                "first_frame_ms": rows[0]["ms_total"],
-               "median_ms": float(np.median(ms)), "mean_ms": float(ms.mean()), "p95_ms": float(np.percentile(ms, 95)),
+               "median_ms": float(np.median(ms)) if ms.size else None, "mean_ms": float(ms.mean()) if ms.size else None,
+               "p95_ms": float(np.percentile(ms, 95)) if ms.size else None,
                "median_triangles": float(np.median(tris)), "full_triangles": int(len(store.faces)),
                "device": rt.device, "frame_ms_budget": rt.budgets.frame_ms,
                # setting the lights, apart from the frame times: the samples completed along the path and their time
@@ -165,10 +173,14 @@ def _print_frames(rows, summary, rt) -> None:
         what += f" (steered toward an estimated {rt.target_psnr:g} dB)"
     if summary["lod"] and rt.budgets.frame_ms is not None:
         what += f", frame-time budget {rt.budgets.frame_ms:g} ms (B-2: the bound's floor {rt.budgets.floor:.3g})"
-    print(f"{what}: median {summary['median_ms']:.2f} ms per frame after the first "
-          f"({summary['first_frame_ms']:.0f} ms), mean {summary['mean_ms']:.2f} ms (frames with an estimate of "
-          f"the error included), p95 {summary['p95_ms']:.2f} ms; median "
-          f"{summary['median_triangles']:,.0f} triangles of {summary['full_triangles']:,} on {rt.device}")
+    if summary["median_ms"] is None:
+        times = f"first frame {summary['first_frame_ms']:.0f} ms, no frame after it to time"
+    else:
+        times = (f"median {summary['median_ms']:.2f} ms per frame after the first "
+                 f"({summary['first_frame_ms']:.0f} ms), mean {summary['mean_ms']:.2f} ms (frames with an estimate of "
+                 f"the error included), p95 {summary['p95_ms']:.2f} ms")
+    print(f"{what}: {times}; median {summary['median_triangles']:,.0f} triangles of {summary['full_triangles']:,} "
+          f"on {rt.device}")
     print(f"setting the lights (not in the frame times): {summary['samples_completed']} light samples completed along "
           f"the path in {summary['lights_seconds']:.2f} s (longest {summary['max_ms_lights']:.0f} ms), "
           f"{summary['samples_completed_at_open']} at open (opening the store took {summary['open_seconds']:.1f} s); "

@@ -15,6 +15,7 @@ import argparse
 import errno
 import logging
 import os
+import re
 import sys
 
 from lodprt.allocator import one_malloc_arena
@@ -44,21 +45,38 @@ def build_parser() -> argparse.ArgumentParser:
 FLAGS = {"overwrite=True": "--overwrite", "frame_ms ": "--frame-ms "}
 
 
-def as_flags(message: str) -> str:
-    """A library error as the command line says it: ``overwrite=True`` becomes ``--overwrite``."""
+def option_flags(parser: argparse.ArgumentParser, command: str) -> dict[str, str]:
+    """The options of ``command``, its long flag by the library's name for it (``gi_rays``: ``--gi-rays``)."""
+    # argparse lists no actions publicly: its _actions
+    sub = next(a for a in parser._actions if a.dest == "command").choices[command]
+    return {a.dest: a.option_strings[-1] for a in sub._actions
+            if a.option_strings and a.option_strings[-1] == "--" + a.dest.replace("_", "-")}
+
+
+def as_flags(message: str, flags: dict[str, str] | None = None) -> str:
+    """A library error as the command line says it: ``overwrite=True`` becomes ``--overwrite``, and an option's
+    library name (``flags``, from ``option_flags``) its flag: a name with an underscore wherever it stands as a
+    word, another only as "NAME VALUE: ..." leading the message ("gi_rays 0: must ..." said the Python name)."""
     for api, flag in FLAGS.items():
         message = message.replace(api, flag)
+    for name, flag in (flags or {}).items():
+        if "_" in name:
+            message = re.sub(rf"(?<![\w./-]){name}\b", flag, message)
+        elif re.match(rf"{re.escape(name)} [^\s:]+:", message):
+            message = flag + message[len(name):]
     return message
 
 
 def main(argv: list[str] | None = None) -> int:
     one_malloc_arena()  # before any thread allocates (lodprt.allocator: run-time and bake peaks)
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
     try:
         return args.handler(args)
     except LodprtError as exc:
-        print(f"lodprt {args.command}: error: {as_flags(str(exc))}", file=sys.stderr)
+        print(f"lodprt {args.command}: error: {as_flags(str(exc), option_flags(parser, args.command))}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C: a bake's Interrupted says what it left (bake --resume)
         print(f"lodprt {args.command}: interrupted" + (f": {exc}" if str(exc) else ""), file=sys.stderr)

@@ -52,7 +52,8 @@ def _add_bake_volume(sub) -> None:
     bv.add_argument("--bounce-threshold", type=float, default=1e-3, metavar="T",
                     help="stop when a pass' energy is below T times the shadowed pass' (default 0.001)")
     bv.add_argument("--step", type=cli_args.finite, default=None, metavar="H",
-                    help="largest ray-march step in scene units (default half the smallest voxel edge)")
+                    help="largest ray-march step in scene units (default half the smallest voxel edge; at most "
+                    "2^20 = 1,048,576 steps across the box's diagonal: a smaller H is refused)")
     bv.add_argument("--rotate-rays", action="store_true", help="turn the shadowed pass' ray set per voxel at random")
     bv.add_argument("--environment", default=None, metavar="ENV", help="store this lighting as the default; " + ENV_HELP)
     cli_args.add_device(bv)
@@ -116,11 +117,15 @@ def cmd_bake_volume(args) -> int:
     from lodprt.devices import resolve_device
     from lodprt.model.environment import load_environment
     from lodprt.model.volume import load_volume
-    from lodprt.precompute.volume import bake_volume
+    from lodprt.model.volume import check_bounds
+    from lodprt.precompute.volume import bake_volume, check_step
 
     cli_args.at_least("--jobs", args.jobs, 1)
+    if args.bounds is not None:
+        check_bounds(args.bounds[:3], args.bounds[3:], "--bounds")
     device = resolve_device(args.device)
     vol = load_volume(args.volume, bounds=args.bounds, albedo=args.albedo, density_scale=args.density_scale)
+    check_step(vol, args.step, "--step")  # before any work: a tiny step marched without end
     env = load_environment(args.environment) if args.environment else None
     print(f"volume {vol.source}: {' x '.join(map(str, vol.shape))} voxels, box {vol.lo.tolist()} .. {vol.hi.tolist()}, "
           f"albedo {vol.albedo.tolist()}", file=sys.stderr)

@@ -62,11 +62,10 @@ class PathPlayer:
         rows = self.played
         if not rows:
             return {"path": self.path, "frames": 0}
-        later = rows[1:] or rows
-        return {"path": self.path, "frames": len(rows),
-                "first_frame_ms": rows[0]["ms_update"],
-                "median_ms_update": float(statistics.median(r["ms_update"] for r in later)),
-                "median_ms_draw": float(statistics.median(r["ms_draw"] for r in later)), **light_costs(rows)}
+        later = rows[1:]  # none after a path of one frame: no median (the first frame's was given as one)
+        median = (lambda key: float(statistics.median(r[key] for r in later))) if later else (lambda key: None)
+        return {"path": self.path, "frames": len(rows), "first_frame_ms": rows[0]["ms_update"],
+                "median_ms_update": median("ms_update"), "median_ms_draw": median("ms_draw"), **light_costs(rows)}
 
 
 def light_costs(rows) -> dict:
@@ -82,7 +81,10 @@ def summary_line(summary: dict) -> str:
     """``summary`` as the line ``lodprt view`` prints when it closes."""
     if not summary["frames"]:
         return f"path {summary['path']}: no frame played"
-    return (f"path {summary['path']}: {summary['frames']} frames, median update {summary['median_ms_update']:.0f} ms "
-            f"and draw {summary['median_ms_draw']:.0f} ms after the first ({summary['first_frame_ms']:.0f} ms); "
+    times = (f"median update {summary['median_ms_update']:.0f} ms and draw {summary['median_ms_draw']:.0f} ms after "
+             f"the first ({summary['first_frame_ms']:.0f} ms)" if summary["median_ms_update"] is not None else
+             f"first frame {summary['first_frame_ms']:.0f} ms, no frame after it to time")
+    n = summary["frames"]
+    return (f"path {summary['path']}: {n} frame{'s' if n != 1 else ''}, {times}; "
             f"setting the lights completed {summary['samples_completed']} light samples in "
             f"{summary['lights_seconds']:.1f} s (longest frame's {summary['max_ms_lights'] / 1e3:.1f} s)")

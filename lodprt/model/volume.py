@@ -50,7 +50,7 @@ class Volume:
 
     def __post_init__(self):
         self.density = check_density(self.density, self.source)
-        self.lo, self.hi = check_bounds(self.lo, self.hi, self.source)
+        self.lo, self.hi = check_bounds(self.lo, self.hi, f"{self.source}: bounds")
         self.albedo = check_albedo(self.albedo, self.source)
 
     @property
@@ -116,12 +116,13 @@ def check_density(density, where: str) -> np.ndarray:
 
 
 def check_bounds(lo, hi, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """The box's corners as float64 (3,) arrays; VolumeError prefixed ``where`` (the field, e.g. 'X: bounds')."""
     lo = np.asarray(lo, np.float64).reshape(-1)
     hi = np.asarray(hi, np.float64).reshape(-1)
     if lo.shape != (3,) or hi.shape != (3,) or not (np.isfinite(lo).all() and np.isfinite(hi).all()):
-        raise VolumeError(f"{where}: bounds must be six finite numbers xmin ymin zmin xmax ymax zmax")
+        raise VolumeError(f"{where}: must be six finite numbers xmin ymin zmin xmax ymax zmax")
     if not (hi > lo).all():
-        raise VolumeError(f"{where}: bounds: max must exceed min on every axis (min {lo.tolist()}, max {hi.tolist()})")
+        raise VolumeError(f"{where}: max must exceed min on every axis (min {lo.tolist()}, max {hi.tolist()})")
     return lo, hi
 
 

@@ -313,19 +313,19 @@ def bake_codec(compress: str, ncoef: int, channels: int, out):
 
 
 def finished_as_asked(target, out, codec) -> dict:
-    """``BakeResult``'s fields of a store that already holds the bake (``target.finished``): encoded with
-    ``codec`` now when it is still float32 (a bake --compress killed while re-encoding, then resumed); refused when
-    it is encoded with another codec."""
+    """``BakeResult``'s fields of a store that already holds the bake (``target.finished``): left as it is when
+    encoded with ``codec`` or when no codec is asked (``none``: a finished encoded store is finished); encoded with
+    ``codec`` now when it is still float32 (a bake --compress killed while re-encoding, then resumed); refused,
+    before anything is said of it, when it is encoded with another codec."""
     from lodprt.store.sample_groups import group_attrs
 
     have = str((group_attrs(target.finished) or {}).get("codec", "none"))
-    summary = target.summary()
-    if have == codec.name or (have == "none" and codec.lossless):
-        return summary
-    if have != "none":
+    if have not in ("none", codec.name) and not codec.lossless:
         raise LodprtError(f"{out}: holds this bake encoded with codec {have}, not {codec.name}: re-encode it with "
                           f"lodprt compress {out} -o OUT --codec {codec.name}")
-    summary["samples"] = compress_finished(out, codec, summary["samples"])
+    summary = target.summary(codec=have)
+    if have == "none" and not codec.lossless:
+        summary["samples"] = compress_finished(out, codec, summary["samples"])
     return summary
 
 

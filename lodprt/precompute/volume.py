@@ -31,6 +31,24 @@ log = logging.getLogger(__name__)
 
 #: default largest march step as a fraction of the smallest voxel edge
 STEP_FRACTION = 0.5
+#: most march steps a ray may take across the box's diagonal: a smaller step is refused (1e-9 ran without end)
+MAX_MARCH_STEPS = 2**20
+
+
+def check_step(volume, step, name: str = "step") -> float:
+    """The march step of ``volume`` (None: STEP_FRACTION of the smallest voxel edge); LodprtError naming ``name``
+    unless it is a positive number giving at most MAX_MARCH_STEPS steps across the box's diagonal."""
+    if step is None:
+        return STEP_FRACTION * float(volume.voxel_size.min())
+    value = float(step)
+    if not np.isfinite(value) or value <= 0:
+        raise LodprtError(f"{name} {value:g}: must be a positive number of scene units")
+    diagonal = float(np.linalg.norm(np.asarray(volume.hi, np.float64) - volume.lo))
+    if diagonal / value > MAX_MARCH_STEPS:
+        raise LodprtError(f"{name} {value:g}: {diagonal / value:.3g} march steps across the box's diagonal "
+                          f"({diagonal:.4g}), more than {MAX_MARCH_STEPS:,} (2^20); give {name} "
+                          f">= {diagonal / MAX_MARCH_STEPS:.3g}")
+    return value
 
 
 def volume_kernels() -> tuple:
@@ -48,10 +66,7 @@ class VolumeGrid:
         wp = warp()
         self.volume = volume
         self.device = resolve_device(device)
-        h = float(volume.voxel_size.min())
-        self.step = STEP_FRACTION * h if step is None else float(step)
-        if not np.isfinite(self.step) or self.step <= 0:
-            raise LodprtError(f"volume step {step!r}: must be a positive number of scene units")
+        self.step = check_step(volume, step, "volume step")
         load_kernels(self.device, *volume_kernels())
         self.density = wp.array(volume.density, dtype=wp.float32, device=self.device)
         self.lo = wp.vec3(*volume.lo.astype(np.float32))

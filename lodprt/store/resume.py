@@ -271,10 +271,12 @@ class BakeTarget:
         tree = open_store(self.finished or self.partial).hierarchy()
         return tree, float((group_attrs((self.finished or self.partial) / "hierarchy") or {}).get("seconds", 0.0))
 
-    def summary(self) -> dict:
-        """What ``BakeResult`` reports of the finished store (nothing baked now, every sample reused)."""
+    def summary(self, codec: str = "none") -> dict:
+        """What ``BakeResult`` reports of the finished store (nothing baked now, every sample reused); ``codec``:
+        the one it is encoded with, named in the warning."""
         attrs = group_attrs(self.finished) or {}
-        log.warning("%s: already holds every light sample of this bake; nothing to do", self.finished)
+        encoded = "" if codec == "none" else f" (encoded with codec {codec}, left as it is)"
+        log.warning("%s: already holds every light sample of this bake%s; nothing to do", self.finished, encoded)
         total = len(self.positions)
         return {"path": str(self.finished), "sh_order": attrs["sh_order"], "channels": attrs["channels"],
                 "coefficients_per_vertex": attrs["coefficients_per_vertex"], "bake_seconds": 0.0,
