@@ -158,7 +158,6 @@ def cmd_render_volume(args) -> int:
     return 0
 
 
-
 def cmd_bake_neighbourhood(args) -> int:
     from lodprt.devices import resolve_device
     from lodprt.model.environment import load_environment

@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import numbers
 
 import numpy as np
 
@@ -212,8 +211,6 @@ def camera_matrices(camera, points=None) -> tuple[np.ndarray, np.ndarray]:
 
 def orbit(camera, angle: float):
     """``camera`` turned by ``angle`` radians about the vertical (``up``) axis through its target."""
-    import dataclasses
-
     return dataclasses.replace(camera, eye=tuple(rotate_about(camera.eye, camera.target, camera.up, angle)))
 
 
